@@ -1,0 +1,5 @@
+"""The one exception type users see: its message is printed as a single line by the CLI."""
+
+
+class PuppetError(Exception):
+    """Bad input or an impossible request; the message says what is wrong and what to do."""
