@@ -51,6 +51,10 @@ class Motion:
             fps=fps,
         )
 
+    def __getitem__(self, frames: slice) -> "Motion":
+        """The frames in a slice, as a Motion."""
+        return Motion(self.offsets[frames], self.rotation[frames], self.translation[frames], self.fps)
+
     def __add__(self, other: "Motion") -> "Motion":
         """Layer two motions of the same length and rate (offsets, angles and shifts add)."""
         if len(self) != len(other) or self.fps != other.fps:

@@ -1,0 +1,167 @@
+"""The `puppet` command: argument parsing and the one place errors become one-line messages."""
+import argparse
+import os
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from puppet.errors import PuppetError
+
+NAMED_COLOURS = {
+    "white": "#ffffff",
+    "black": "#000000",
+    "green": "#00b140",  # chroma-key green
+    "blue": "#0047bb",  # chroma-key blue
+    "magenta": "#ff00ff",
+    "grey": "#808080",
+}
+POINTS_HELP = (
+    "rig by hand from 5 points 'x,y' in image pixels, in this order: the eye centre on the image's "
+    "left, the eye centre on the image's right, the nose tip, the mouth corner on the image's left, "
+    "the mouth corner on the image's right"
+)
+
+
+def parse_size(text: str) -> tuple[int, int] | int:
+    """'640x480' → (640, 480); '512' → 512 (the longer side)."""
+    try:
+        if "x" in text.lower():
+            width, height = (int(v) for v in text.lower().split("x"))
+            size = (width, height)
+        else:
+            size = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT or one number, got {text!r}") from None
+    sides = size if isinstance(size, tuple) else (size,)
+    if any(s < 16 or s > 4096 for s in sides):
+        raise argparse.ArgumentTypeError("sizes must be between 16 and 4096 pixels")
+    return size
+
+
+def parse_background(text: str):
+    """'transparent', a colour name or '#rrggbb[aa]' → renderer.Background."""
+    from puppet.renderer import Background
+
+    text = NAMED_COLOURS.get(text.lower(), text)
+    if text.lower() == "transparent":
+        return Background()
+    digits = text.lstrip("#")
+    if len(digits) not in (6, 8) or any(c not in "0123456789abcdefABCDEF" for c in digits):
+        raise argparse.ArgumentTypeError(f"expected 'transparent', one of {', '.join(NAMED_COLOURS)} or #rrggbb, got {text!r}")
+    values = [int(digits[i : i + 2], 16) / 255 for i in range(0, len(digits), 2)]
+    return Background(tuple(values + [1.0] * (4 - len(values))))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="puppet", description="Make any portrait talk: give it a picture and speech, get a talking puppet.")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    render = commands.add_parser(
+        "render",
+        help="render a talking video (or PNG frames) from a portrait and audio",
+        description="Render a talking video from a portrait (image or puppet bundle) and speech audio.",
+        epilog="examples:\n  puppet render --demo -o demo.mp4\n  puppet render face.jpg speech.wav -o talk.mp4\n"
+        "  puppet render cartoon.png speech.mp3 --landmarks cartoon.txt -o frames/ --background transparent",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    render.add_argument("input", nargs="?", type=Path, help="portrait image (PNG/JPEG/...) or puppet bundle folder")
+    render.add_argument("audio", nargs="?", type=Path, help="speech: wav, flac, mp3, ogg, m4a, ... (any rate, mono or stereo)")
+    render.add_argument("-o", "--output", type=Path, required=True, help="output .mp4/.mov/.mkv, or a folder name (no suffix) for RGBA PNG frames")
+    render.add_argument("--demo", action="store_true", help="use the bundled character and speech clip")
+    _add_rigging_arguments(render)
+    render.add_argument("--motion", default="loudness", help="motion source: 'loudness' (built-in, default) or a track .npz (from --landmarks-out)")
+    render.add_argument("--size", type=parse_size, help="output WIDTHxHEIGHT, or one number for the longer side (default: the portrait's size, at most 1080)")
+    render.add_argument("--fps", type=float, default=25.0, help="frames per second (default 25)")
+    render.add_argument("--background", type=parse_background, help="'transparent', white, black, green, blue, magenta, grey or #rrggbb (default: transparent for frames, white for video)")
+    render.add_argument("--msaa", type=int, default=4, choices=(0, 2, 4, 8), help="anti-aliasing samples per pixel (default 4)")
+    render.add_argument("--seed", type=int, default=0, help="seed for blinks and idle motion (default 0)")
+    render.add_argument("--landmarks-out", type=Path, help="also write the motion track (.npz: landmarks (T,68,3), fps)")
+    render.add_argument("-f", "--force", action="store_true", help="overwrite existing outputs")
+    render.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+
+    rig = commands.add_parser(
+        "rig",
+        help="rig a portrait into a puppet bundle (landmarks + mesh) you can check and reuse",
+        description="Rig a portrait: find (or take) its 68 landmarks, build the mesh, save a puppet bundle folder with a preview.png.",
+        epilog="examples:\n  puppet rig photo.jpg\n  puppet rig cartoon.png --landmarks cartoon.txt -o cartoon.puppet\n"
+        "  puppet rig monster.png --points 210,240 300,238 256,300 220,350 292,352",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    rig.add_argument("image", type=Path, help="portrait image")
+    rig.add_argument("-o", "--output", type=Path, help="bundle folder to write (default: IMAGE's name + .puppet beside it)")
+    _add_rigging_arguments(rig)
+    rig.add_argument("-f", "--force", action="store_true", help="overwrite an existing bundle")
+
+    bench = commands.add_parser("bench", help="measure rendering and export speed on this machine")
+    bench.add_argument("--json", action="store_true", help="print the figures as one JSON object")
+    bench.add_argument("--seconds", type=float, default=3.0, help="time spent on each render measurement (default 3)")
+    bench.add_argument("--clip", type=float, default=30.0, help="length of the export clip in seconds (default 30)")
+    return parser
+
+
+def _add_rigging_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--landmarks", type=Path, help="68-point landmark file: text (68 rows 'x y [z]'), .json or .npy, image pixels")
+    group.add_argument("--points", nargs=5, metavar="X,Y", help=POINTS_HELP)
+
+
+def run(args: argparse.Namespace) -> int:
+    from puppet import bundle
+
+    points = None
+    if getattr(args, "points", None):
+        from puppet.template import parse_points
+
+        points = parse_points(args.points)
+
+    if args.command == "rig":
+        puppet = bundle.load(args.image, args.landmarks, points)
+        folder = bundle.save(puppet, args.output or args.image.with_suffix(".puppet"), args.force)
+        print(f"rigged {args.image} -> {folder}  (check {folder / bundle.PREVIEW_FILE}; render with: puppet render {folder} SPEECH.wav -o out.mp4)")
+        return 0
+
+    if args.command == "bench":
+        from puppet.bench import main as bench_main
+
+        return bench_main(args.json, args.seconds, args.clip)
+
+    from puppet import video
+
+    if args.demo:
+        if args.input is not None:
+            raise PuppetError("--demo uses the bundled character and speech: give no INPUT or AUDIO with it")
+        image, landmark_file, speech = bundle.demo_files()
+        puppet = bundle.load(image, landmark_file)
+        audio_path = speech
+    else:
+        if args.input is None:
+            raise PuppetError("give a portrait (image or bundle) and an audio file, or --demo")
+        puppet = bundle.load(args.input, args.landmarks, points)
+        audio_path = args.audio
+        if audio_path is None and args.motion in video.MOTION_SOURCES:
+            raise PuppetError("give an audio file after the portrait (or --motion TRACK.npz)")
+    options = video.VideoOptions(fps=args.fps, background=args.background, samples=args.msaa, motion=args.motion)
+    if args.size is not None:
+        size = args.size if isinstance(args.size, tuple) else video.output_size(puppet.rig.image_size, args.size)
+        options = replace(options, size=size)
+    options = replace(options, life=replace(options.life, seed=args.seed))
+    output = video.render(puppet, audio_path, args.output, options, args.force, args.landmarks_out, progress=not args.quiet)
+    print(f"wrote {output}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return run(args)
+    except PuppetError as error:
+        print(f"puppet: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("puppet: interrupted", file=sys.stderr)
+        return 130
+    except Exception as error:  # a bug, not bad input: still one line unless asked for more
+        if os.environ.get("PUPPET_DEBUG"):
+            raise
+        print(f"puppet: internal error: {type(error).__name__}: {error} (set PUPPET_DEBUG=1 for details)", file=sys.stderr)
+        return 1

@@ -1,0 +1,153 @@
+"""GPU drawing of a rigged portrait: one renderer for the window, headless export, and tests.
+
+Each class owns its GL resources and is handed a moderngl context. `PuppetRenderer` draws the
+mesh into whatever framebuffer is bound; `Canvas` is the offscreen framebuffer (multisampled,
+resolved, read back) used headless. The portrait texture is premultiplied once at upload, so
+linear filtering and blending (ONE, ONE_MINUS_SRC_ALPHA) keep transparent edges clean.
+"""
+from dataclasses import dataclass
+from importlib.resources import files
+
+import moderngl
+import numpy as np
+
+from puppet.errors import PuppetError
+from puppet.rig import Rig
+
+
+def shader_source(name: str) -> str:
+    """The text of a GLSL file from the installed `shaders/` folder."""
+    return (files("puppet.shaders") / name).read_text()
+
+
+def headless_context() -> moderngl.Context:
+    """A standalone OpenGL 3.3+ context through EGL: needs no display (Mesa llvmpipe on a CPU)."""
+    try:
+        return moderngl.create_standalone_context(require=330, backend="egl")
+    except Exception as error:  # moderngl raises plain Exception when no EGL/GL driver loads
+        raise PuppetError(f"cannot create an OpenGL context through EGL ({error}); install Mesa's EGL (libegl1, libgl1-mesa-dri)") from None
+
+
+def fit(image_size: tuple[int, int], target_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Scale (2,) and shift (2,) placing the portrait centred in the target, aspect kept."""
+    scale = min(target_size[0] / image_size[0], target_size[1] / image_size[1])
+    shift = (np.array(target_size) - scale * np.array(image_size)) / 2
+    return np.array([scale, scale], np.float32), shift.astype(np.float32)
+
+
+def premultiply(image: np.ndarray) -> np.ndarray:
+    """(H, W, 4) uint8 RGBA with colour multiplied by alpha."""
+    alpha = image[..., 3:4].astype(np.uint16)
+    rgb = (image[..., :3].astype(np.uint16) * alpha + 127) // 255
+    return np.concatenate([rgb.astype(np.uint8), image[..., 3:4]], axis=-1)
+
+
+class PuppetRenderer:
+    """Draws one rigged portrait; only the per-vertex displacement changes between frames."""
+
+    def __init__(self, ctx: moderngl.Context, image: np.ndarray, rig: Rig):
+        """image: (H, W, 4) uint8 RGBA, straight alpha, rows top to bottom; rig: its mesh."""
+        height, width = image.shape[:2]
+        if (width, height) != tuple(rig.image_size):
+            raise PuppetError(f"the rig is for a {rig.image_size[0]}x{rig.image_size[1]} image, not {width}x{height}")
+        self.ctx = ctx
+        self.rig = rig
+        self.program = ctx.program(vertex_shader=shader_source("puppet.vert"), fragment_shader=shader_source("puppet.frag"))
+        self.texture = ctx.texture((width, height), 4, np.ascontiguousarray(premultiply(image)).tobytes())
+        self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.texture.build_mipmaps()
+        self.texture.repeat_x = self.texture.repeat_y = False
+        rest = rig.vertices[:, :2].astype(np.float32)
+        self.rest = rest
+        self.rest_buffer = ctx.buffer(rest.tobytes())
+        self.offset_buffer = ctx.buffer(reserve=rest.nbytes, dynamic=True)
+        self.mouth_buffer = ctx.buffer(rig.mouth_coords.tobytes())
+        skin = np.delete(rig.triangles, rig.mouth, axis=0) if rig.mouth_style.interior == "cavity" else rig.triangles
+        self.skin = self._vertex_array(skin)
+        self.mouth = self._vertex_array(rig.triangles[rig.mouth])
+        style = rig.mouth_style
+        self.program["u_image_size"].value = (float(width), float(height))
+        self.program["u_cavity"].value = tuple(style.cavity)
+        self.program["u_teeth"].value = tuple(style.teeth)
+        self.program["u_tongue"].value = tuple(style.tongue)
+
+    def _vertex_array(self, triangles: np.ndarray) -> moderngl.VertexArray:
+        index = self.ctx.buffer(np.ascontiguousarray(triangles, dtype=np.int32).tobytes())
+        return self.ctx.vertex_array(
+            self.program,
+            [(self.rest_buffer, "2f", "in_rest"), (self.offset_buffer, "2f", "in_offset"), (self.mouth_buffer, "2f", "in_mouth")],
+            index_buffer=index,
+            index_element_size=4,
+        )
+
+    def draw(self, positions: np.ndarray, target_size: tuple[int, int]) -> None:
+        """Draw into the bound framebuffer of `target_size` (width, height) pixels.
+
+        positions: (N, 2) float32 vertex positions this frame, portrait pixels (`Rig.animate`).
+        The portrait is fitted into the target, centred, aspect kept.
+        """
+        self.offset_buffer.write(np.ascontiguousarray(positions - self.rest, dtype=np.float32).tobytes())
+        scale, shift = fit(self.rig.image_size, target_size)
+        self.program["u_target_size"].value = (float(target_size[0]), float(target_size[1]))
+        self.program["u_scale"].value = tuple(scale)
+        self.program["u_shift"].value = tuple(shift)
+        self.ctx.enable(moderngl.BLEND)
+        self.ctx.disable(moderngl.CULL_FACE | moderngl.DEPTH_TEST)
+        self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
+        self.texture.use(0)
+        self.program["u_texture"].value = 0
+        self.program["u_layer"].value = 0
+        self.skin.render(moderngl.TRIANGLES)
+        if self.rig.mouth_style.interior == "cavity":
+            self.program["u_layer"].value = 1
+            self.mouth.render(moderngl.TRIANGLES)
+
+
+@dataclass(frozen=True)
+class Background:
+    """What shows where the portrait is transparent: RGBA in 0–1; alpha 0 keeps it transparent."""
+
+    rgba: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+
+    @property
+    def opaque(self) -> bool:
+        return self.rgba[3] >= 1.0
+
+
+class Canvas:
+    """An offscreen framebuffer: draw with MSAA, resolve, read back as straight-alpha RGBA."""
+
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], samples: int = 4):
+        """size: (width, height) pixels; samples: MSAA samples (0 or 1 = none)."""
+        self.ctx = ctx
+        self.size = size
+        samples = min(samples, ctx.max_samples) if samples > 1 else 0
+        self.resolved = ctx.framebuffer(color_attachments=[ctx.renderbuffer(size, 4)])
+        self.multisampled = ctx.framebuffer(color_attachments=[ctx.renderbuffer(size, 4, samples=samples)]) if samples else None
+
+    def begin(self, background: Background) -> None:
+        """Bind the drawing framebuffer and clear it to the (premultiplied) background."""
+        target = self.multisampled or self.resolved
+        target.use()
+        r, g, b, a = background.rgba
+        target.clear(r * a, g * a, b * a, a)
+
+    def read(self) -> np.ndarray:
+        """(H, W, 4) uint8 RGBA, straight alpha, rows top to bottom: the frame just drawn."""
+        if self.multisampled is not None:
+            self.ctx.copy_framebuffer(self.resolved, self.multisampled)
+        width, height = self.size
+        data = np.frombuffer(self.resolved.read(components=4, alignment=1), np.uint8)
+        frame = data.reshape(height, width, 4)[::-1]  # GL rows run bottom-up: the one flip
+        return unpremultiply(frame)
+
+
+def unpremultiply(frame: np.ndarray) -> np.ndarray:
+    """(H, W, 4) uint8 straight-alpha RGBA from premultiplied; opaque frames pass through."""
+    alpha = frame[..., 3]
+    if alpha.min() == 255:
+        return np.ascontiguousarray(frame)
+    out = frame.astype(np.uint16)
+    a = np.maximum(alpha, 1).astype(np.uint16)[..., None]
+    out[..., :3] = np.minimum((out[..., :3] * 255 + a // 2) // a, 255)
+    return out.astype(np.uint8)

@@ -1,0 +1,375 @@
+"""Rig: the triangle mesh that carries a portrait, and how its vertices move.
+
+Vertices, in order: the 68 landmarks; an outline ring around the head (forehead, hair, ears
+and jaw, extrapolated from the face) that moves rigidly with the head; fixed points on the
+image border so the background never tears. The mesh is a Delaunay triangulation (scipy) of
+all of them, with the inner-lip and eye rings forced in as edges (edge flips) and their
+insides re-triangulated as strips, so the mouth opening and each eye are exact sets of
+triangles: the mouth triangles are drawn as a mouth interior, the eye triangles may
+collapse to nothing when the lids close.
+
+Every position is in image pixels, origin top-left, x right, y down, z toward the viewer.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import Delaunay
+
+from puppet import landmarks as lm
+from puppet.errors import PuppetError
+from puppet.motion import Motion
+from puppet.pose import head_pivot, move_points
+
+# Outline ring, in inter-ocular distances (IOD).
+OUTLINE_JAW_MARGIN = 0.35  # how far outside the jaw line the ring runs
+OUTLINE_TOP = 2.3  # how far above the eye line the top of the head is assumed to be
+OUTLINE_TOP_POINTS = 9  # ring points over the top of the head
+OUTLINE_DEPTH = -0.6  # z of the ring: behind the face
+BORDER_POINTS_PER_SIDE = 6  # fixed points along each image edge, corners included
+OUTLINE_MIN_SPACING = 0.25  # outline points closer than this (IOD) to another are dropped
+DUPLICATE_NUDGE = 0.03  # coinciding landmarks are moved this far (IOD) apart to find the topology
+BORDER_MARGIN = 0.01  # outline points are kept this fraction of the image size inside it
+
+# Fixed strips filling the rings (vertex triples, counter-clockwise on screen).
+MOUTH_STRIP = ((60, 61, 67), (61, 66, 67), (61, 62, 66), (62, 65, 66), (62, 63, 65), (63, 64, 65))
+EYE_STRIPS = (
+    ((36, 37, 41), (37, 40, 41), (37, 38, 40), (38, 39, 40)),
+    ((42, 43, 47), (43, 46, 47), (43, 44, 46), (44, 45, 46)),
+)
+RINGS = (tuple(lm.INNER_LIP), tuple(lm.RIGHT_EYE), tuple(lm.LEFT_EYE))
+# Where the opening is forced apart when finding the topology of a closed mouth: this
+# fraction of the way from the lip seam toward the outer lip.
+TOPOLOGY_MOUTH_OPENING = 0.4
+
+# Mouth-interior coordinates of the inner-lip points: (across from corner to corner, from the
+# upper lip (0) to the lower lip (1)); the fragment shader paints teeth and tongue from them.
+MOUTH_COORDS = {60: (0.0, 0.5), 61: (0.25, 0.0), 62: (0.5, 0.0), 63: (0.75, 0.0),
+                64: (1.0, 0.5), 65: (0.75, 1.0), 66: (0.5, 1.0), 67: (0.25, 1.0)}
+
+# Fold guard: a triangle (other than mouth and eye triangles, which may close) must keep this
+# fraction of its rest area; otherwise the frame's head motion, then its offsets, are scaled back.
+MIN_AREA_RATIO = 0.05
+GUARD_STEPS = 8
+
+
+@dataclass(frozen=True)
+class MouthStyle:
+    """How the inside of the mouth is drawn when the lips part (RGB, 0–1)."""
+
+    cavity: tuple[float, float, float] = (0.18, 0.04, 0.06)
+    teeth: tuple[float, float, float] = (0.96, 0.95, 0.90)
+    tongue: tuple[float, float, float] = (0.78, 0.33, 0.36)
+    # "cavity": paint the interior; "image": stretch what the portrait shows there (for
+    # portraits drawn with an open mouth). Chosen from the rest opening when rigging.
+    interior: str = "cavity"
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A rigged portrait's mesh.
+
+    vertices:  (N, 3) float32 rest positions, pixels: 68 landmarks, then `n_outline` outline
+               points, then border points.
+    triangles: (M, 3) int32 vertex indices, counter-clockwise on screen.
+    mouth:     (K,) int32 indices into `triangles` of the inner-mouth triangles.
+    eyes:      (E,) int32 indices into `triangles` of the eye triangles.
+    image_size: (width, height) of the portrait in pixels.
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    mouth: np.ndarray
+    eyes: np.ndarray
+    n_outline: int
+    image_size: tuple[int, int]
+    mouth_style: MouthStyle = MouthStyle()
+
+    @property
+    def landmarks(self) -> np.ndarray:
+        """(68, 3) float32 rest landmarks."""
+        return self.vertices[: lm.N_LANDMARKS]
+
+    @property
+    def head(self) -> slice:
+        """The vertices that move with the head: landmarks and outline."""
+        return slice(0, lm.N_LANDMARKS + self.n_outline)
+
+    @property
+    def mouth_coords(self) -> np.ndarray:
+        """(N, 2) float32 mouth-interior coordinates (zero off the inner lip), see MOUTH_COORDS."""
+        coords = np.zeros((len(self.vertices), 2), np.float32)
+        for index, uv in MOUTH_COORDS.items():
+            coords[index] = uv
+        return coords
+
+    def animate(self, motion: Motion) -> np.ndarray:
+        """(T, N, 2) float32 screen positions (image pixels) of every vertex for each frame.
+
+        Landmarks get their offsets, then landmarks and outline turn with the head about the
+        neck pivot (orthographic projection); border vertices stay put. Frames that would
+        fold a triangle have their head motion, then their offsets, scaled back until none does.
+        """
+        offsets = _close_overlapping_lips(self.landmarks, motion.offsets)
+        target = self._place(motion, offsets, 1.0, 1.0)
+        bad = np.flatnonzero(self._folded(target))
+        for frame in bad:
+            one = motion[frame : frame + 1]
+            pose_scale = self._largest_safe(lambda s: self._place(one, offsets[frame : frame + 1], s, 1.0))
+            if pose_scale > 0:
+                target[frame] = self._place(one, offsets[frame : frame + 1], pose_scale, 1.0)[0]
+            else:
+                offset_scale = self._largest_safe(lambda s: self._place(one, offsets[frame : frame + 1], 0.0, s))
+                target[frame] = self._place(one, offsets[frame : frame + 1], 0.0, offset_scale)[0]
+        return target
+
+    def _place(self, motion: Motion, offsets: np.ndarray, pose_scale: float, offset_scale: float) -> np.ndarray:
+        """(T, N, 2) positions with the head pose and the offsets scaled by the given factors."""
+        scaled = Motion(offsets * offset_scale, motion.rotation * pose_scale, motion.translation * pose_scale, motion.fps)
+        head_offsets = np.zeros((len(motion), self.head.stop, 3), np.float32)
+        head_offsets[:, : lm.N_LANDMARKS] = scaled.offsets
+        moved = move_points(self.vertices[self.head], head_pivot(self.landmarks), scaled, head_offsets)
+        positions = np.repeat(self.vertices[None, :, :2], len(motion), axis=0)
+        positions[:, self.head] = moved[..., :2]
+        return positions
+
+    def _folded(self, positions: np.ndarray) -> np.ndarray:
+        """(T,) bool: frames where a triangle shrinks below MIN_AREA_RATIO of its rest area or
+        flips; mouth and eye triangles may shrink to zero but not flip."""
+        rest = _signed_areas(self.vertices[None, :, :2], self.triangles)[0]
+        areas = _signed_areas(positions, self.triangles)
+        floor = MIN_AREA_RATIO * rest
+        closable = np.zeros(len(self.triangles), bool)
+        closable[self.mouth] = closable[self.eyes] = True
+        floor[closable] = -1e-3 * rest.max()
+        return np.any(areas < floor, axis=1)
+
+    def _largest_safe(self, place) -> float:
+        """Largest scale in [0, 1] (by bisection) for which `place(scale)` folds nothing; 0 if none."""
+        if not self._folded(place(0.0))[0]:
+            low, high = 0.0, 1.0
+            for _ in range(GUARD_STEPS):
+                mid = (low + high) / 2
+                low, high = (mid, high) if not self._folded(place(mid))[0] else (low, mid)
+            return low
+        return 0.0
+
+
+def build(landmarks: np.ndarray, image_size: tuple[int, int], mouth_style: MouthStyle | None = None) -> Rig:
+    """Rig a portrait from its (68, 2|3) landmarks (pixels) and (width, height)."""
+    width, height = image_size
+    points = lm.with_depth(lm.validate(landmarks, image_size=image_size))
+    points = _untangle(_separate_crossed_lips(points))
+    outline = _outline(points, image_size)
+    border = _border(image_size)
+    vertices = np.concatenate([points, outline, border]).astype(np.float32)
+
+    topology = vertices[:, :2].copy()
+    topology[: lm.N_LANDMARKS] = _nudge_duplicates(_opened_mouth(points[:, :2]))
+    triangles = Delaunay(topology.astype(np.float64)).simplices.astype(np.int64)
+    triangles = _counter_clockwise(topology, triangles)
+    for ring in RINGS:
+        for a, b in zip(ring, ring[1:] + ring[:1]):
+            triangles = _force_edge(topology, triangles, a, b)
+    triangles, mouth, eyes = _fill_rings(topology, triangles)
+
+    if mouth_style is None:
+        gap = np.mean([np.linalg.norm(points[a, :2] - points[b, :2]) for a, b in lm.INNER_LIP_PAIRS])
+        mouth_style = MouthStyle(interior="image" if gap > 0.12 * lm.face_scale(points) else "cavity")
+    rig = Rig(vertices, triangles.astype(np.int32), mouth, eyes, len(outline), (width, height), mouth_style)
+    if rig._folded(vertices[None, :, :2])[0]:
+        raise PuppetError("these landmarks make a folded mesh (are points out of order?); check the landmark file")
+    return rig
+
+
+def _separate_crossed_lips(points: np.ndarray) -> np.ndarray:
+    """Inner-lip pairs whose upper point lies below the lower one are set to their midpoint."""
+    points = points.copy()
+    down = lm.face_axes(points)[1]
+    for upper, lower in lm.INNER_LIP_PAIRS:
+        if np.dot(points[lower, :2] - points[upper, :2], down) < 0:
+            points[[upper, lower]] = points[[upper, lower]].mean(0)
+    return points
+
+
+def _close_overlapping_lips(rest: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(T, 68, 3) offsets with inner-lip pairs that would cross meeting at their midpoint instead."""
+    offsets = offsets.copy()
+    down = lm.face_axes(rest)[1]
+    for upper, lower in lm.INNER_LIP_PAIRS:
+        up, low = rest[upper] + offsets[:, upper], rest[lower] + offsets[:, lower]
+        crossed = (low[:, :2] - up[:, :2]) @ down < 0
+        middle = (up + low) / 2
+        offsets[crossed, upper] = middle[crossed] - rest[upper]
+        offsets[crossed, lower] = middle[crossed] - rest[lower]
+    return offsets
+
+
+def _outline(points: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """(K, 3) float32 ring around the head: the jaw pushed outward, then an arc over the top."""
+    scale = lm.face_scale(points)
+    x_axis, y_axis = lm.face_axes(points)
+    eyes = lm.eye_centres(points[:, :2]).mean(0)
+    centre = eyes + 0.3 * scale * y_axis
+    jaw = points[list(lm.JAW)[::2], :2]
+    outward = (jaw - centre) / np.linalg.norm(jaw - centre, axis=1, keepdims=True)
+    jaw_ring = jaw + OUTLINE_JAW_MARGIN * scale * outward
+    ends_mid = (jaw_ring[0] + jaw_ring[-1]) / 2
+    half_width = np.linalg.norm(jaw_ring[-1] - jaw_ring[0]) / 2
+    height = np.dot(ends_mid - eyes, -y_axis) + OUTLINE_TOP * scale
+    angles = np.linspace(np.pi, 0, OUTLINE_TOP_POINTS + 2)[1:-1]
+    arc = ends_mid + np.outer(np.cos(angles) * half_width, x_axis) + np.outer(np.sin(angles) * height, -y_axis)
+    ring = np.concatenate([jaw_ring, arc[::-1]])
+    width, height_px = image_size
+    margin = BORDER_MARGIN * np.array([width, height_px])
+    ring = np.clip(ring, margin, np.array([width, height_px]) - margin)
+    ring = ring[_distinct(ring, OUTLINE_MIN_SPACING * scale)]
+    ring = ring[~_in_polygon(ring, points[list(lm.JAW) + list(lm.LEFT_BROW)[::-1] + list(lm.RIGHT_BROW)[::-1], :2])]
+    depth = np.full((len(ring), 1), OUTLINE_DEPTH * scale)
+    return np.hstack([ring, depth]).astype(np.float32)
+
+
+def _border(image_size: tuple[int, int]) -> np.ndarray:
+    """(4·(P−1), 3) float32 fixed points around the image edge, corners included."""
+    width, height = image_size
+    t = np.linspace(0, 1, BORDER_POINTS_PER_SIDE)[:-1]
+    top = np.stack([t * width, 0 * t], 1)
+    right = np.stack([width + 0 * t, t * height], 1)
+    bottom = np.stack([width - t * width, height + 0 * t], 1)
+    left = np.stack([0 * t, height - t * height], 1)
+    edge = np.concatenate([top, right, bottom, left])
+    return np.hstack([edge, np.zeros((len(edge), 1))]).astype(np.float32)
+
+
+def _opened_mouth(points: np.ndarray) -> np.ndarray:
+    """(68, 2) landmarks with a closed inner mouth pushed open, only to find the mesh topology."""
+    points = points.copy()
+    outer = {61: 50, 62: 51, 63: 52, 67: 58, 66: 57, 65: 56}
+    for upper, lower in lm.INNER_LIP_PAIRS:
+        seam = (points[upper] + points[lower]) / 2
+        for inner in (upper, lower):
+            opened = seam + TOPOLOGY_MOUTH_OPENING * (points[outer[inner]] - seam)
+            if np.linalg.norm(opened - seam) > np.linalg.norm(points[inner] - seam):
+                points[inner] = opened
+    return points
+
+
+def _distinct(points: np.ndarray, spacing: float) -> np.ndarray:
+    """(N,) bool: False for a point closer than `spacing` to an earlier kept one."""
+    keep = np.ones(len(points), bool)
+    for i in range(1, len(points)):
+        keep[i] = np.min(np.linalg.norm(points[:i][keep[:i]] - points[i], axis=1)) >= spacing
+    return keep
+
+
+def _untangle(points: np.ndarray) -> np.ndarray:
+    """(68, 3) landmarks with any point that lies inside the (opened) inner-lip or an eye ring
+    but is not on it pushed just outside. Only the mesh uses these positions: the portrait
+    still shows exactly what it shows, since texture coordinates follow the same points."""
+    points = points.copy()
+    step = DUPLICATE_NUDGE * lm.face_scale(points)
+    for ring in RINGS:
+        polygon = _opened_mouth(points[:, :2])[list(ring)]
+        centre = polygon.mean(0)
+        others = [i for i in range(lm.N_LANDMARKS) if i not in ring]
+        for _ in range(100):
+            inside = np.array(others)[_in_polygon(points[others, :2], polygon)]
+            if not len(inside):
+                break
+            away = points[inside, :2] - centre
+            points[inside, :2] += step * away / np.maximum(np.linalg.norm(away, axis=1, keepdims=True), 1e-6)
+    return points
+
+
+def _nudge_duplicates(points: np.ndarray) -> np.ndarray:
+    """(68, 2) landmarks where a point that coincides with another (hand-placed files often
+    put inner and outer lip points on one spot) is moved a hair toward the centre of its part."""
+    points = points.copy()
+    step = DUPLICATE_NUDGE * lm.face_scale(points)
+    part_of = {i: part for part in lm.FACIAL_PARTS.values() for i in part}
+    for _ in range(10):
+        clash = ~_distinct(points, step / 10)
+        if not clash.any():
+            break
+        for i in np.flatnonzero(clash):
+            towards = points[list(part_of[i])].mean(0) - points[i]
+            points[i] += step * towards / max(np.linalg.norm(towards), 1e-6)
+    return points
+
+
+def _signed_areas(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(T, M) signed areas, positive for counter-clockwise on screen (y down), of (T, N, 2) positions."""
+    a, b, c = (positions[:, triangles[:, k]] for k in range(3))
+    ab, ac = b - a, c - a
+    return -(ab[..., 0] * ac[..., 1] - ab[..., 1] * ac[..., 0]) / 2
+
+
+def _counter_clockwise(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    flip = _signed_areas(points[None], triangles)[0] < 0
+    triangles = triangles.copy()
+    triangles[flip] = triangles[flip][:, [0, 2, 1]]
+    return triangles
+
+
+def _crosses(p: np.ndarray, a: int, b: int, c: int, d: int) -> bool:
+    """Whether segments a–b and c–d cross at a point inside both (sharing an end does not count)."""
+    if len({a, b, c, d}) < 4:
+        return False
+
+    def side(o, q, r):
+        return np.sign((q[0] - o[0]) * (r[1] - o[1]) - (q[1] - o[1]) * (r[0] - o[0]))
+
+    return side(p[a], p[b], p[c]) * side(p[a], p[b], p[d]) < 0 and side(p[c], p[d], p[a]) * side(p[c], p[d], p[b]) < 0
+
+
+def _force_edge(points: np.ndarray, triangles: np.ndarray, a: int, b: int) -> np.ndarray:
+    """Flip edges until a–b is an edge of the triangulation (constrained-edge recovery)."""
+    triangles = [tuple(t) for t in triangles]
+    for _ in range(200):
+        edges = {}
+        for index, t in enumerate(triangles):
+            for k in range(3):
+                edges.setdefault(frozenset((t[k], t[(k + 1) % 3])), []).append(index)
+        if frozenset((a, b)) in edges:
+            return np.array(triangles)
+        for edge, owners in edges.items():
+            c, d = tuple(edge)
+            if len(owners) != 2 or not _crosses(points, a, b, c, d):
+                continue
+            (e,) = set(triangles[owners[0]]) - edge
+            (f,) = set(triangles[owners[1]]) - edge
+            if _crosses(points, c, d, e, f):  # convex quad: flipping keeps both triangles valid
+                new = [t for i, t in enumerate(triangles) if i not in owners]
+                triangles = new + [tuple(x) for x in _counter_clockwise(points, np.array([(e, f, c), (f, e, d)]))]
+                break
+        else:
+            break
+    raise PuppetError("could not build a mesh around the mouth and eyes; check the order of the landmarks")
+
+
+def _fill_rings(points: np.ndarray, triangles: np.ndarray):
+    """Replace the triangles inside the inner lip and each eye ring by the fixed strips.
+
+    Returns (triangles (M, 3), mouth indices, eye indices).
+    """
+    strips = (MOUTH_STRIP,) + EYE_STRIPS
+    inside = np.zeros(len(triangles), bool)
+    for ring in RINGS:
+        members = np.isin(triangles, ring).all(axis=1)
+        centroids = points[triangles].mean(axis=1)
+        polygon = points[list(ring)]
+        inside |= members & _in_polygon(centroids, polygon)
+    kept = triangles[~inside]
+    filled = [_counter_clockwise(points, np.array(strip)) for strip in strips]
+    mouth = np.arange(len(kept), len(kept) + len(filled[0]))
+    eyes = np.arange(mouth[-1] + 1, mouth[-1] + 1 + len(filled[1]) + len(filled[2]))
+    return np.concatenate([kept] + filled), mouth.astype(np.int32), eyes.astype(np.int32)
+
+
+def _in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """(P,) bool: even-odd test of (P, 2) points against a (V, 2) polygon."""
+    x, y = points[:, 0:1], points[:, 1:2]
+    x0, y0 = polygon[:, 0], polygon[:, 1]
+    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    straddles = (y0 > y) != (y1 > y)
+    at = x0 + (y - y0) * (x1 - x0) / np.where(y1 == y0, 1e-12, y1 - y0)
+    return np.sum(straddles & (x < at), axis=1) % 2 == 1

@@ -1,0 +1,114 @@
+"""Talking video: audio (or a motion track) → motion → mesh positions → frames → output.
+
+The whole offline pipeline reads top to bottom in `render`; frames are rendered headless and
+handed to the output as they come, so memory stays flat however long the audio is.
+"""
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from puppet import audio, export, track
+from puppet.bundle import Puppet
+from puppet.errors import PuppetError
+from puppet.life import LifeOptions, life_motion
+from puppet.loudness import LoudnessOptions, loudness_motion
+from puppet.motion import Motion
+from puppet.pose import posed_landmarks
+from puppet.renderer import Background, Canvas, PuppetRenderer, headless_context
+
+DEFAULT_FPS = 25.0
+DEFAULT_MAX_SIDE = 1080  # default output: the portrait's own size, no larger than this
+CHUNK_FRAMES = 250  # frames posed at a time (10 s at 25 fps): bounds memory on long inputs
+MOTION_SOURCES = ("loudness",)  # built-in sources; anything else given to --motion is a track file
+
+
+@dataclass(frozen=True)
+class VideoOptions:
+    size: tuple[int, int] | None = None  # output (width, height); None: the portrait's size, capped
+    fps: float = DEFAULT_FPS  # output frames per second
+    background: Background | None = None  # None: transparent for PNG frames, white for video
+    samples: int = 4  # MSAA samples per pixel
+    motion: str = "loudness"  # a built-in source name or a track file (.npz)
+    loudness: LoudnessOptions = field(default_factory=LoudnessOptions)  # the baseline's settings
+    life: LifeOptions = field(default_factory=LifeOptions)  # blinks, idle head motion, breathing
+
+
+def output_size(image_size: tuple[int, int], max_side: int = DEFAULT_MAX_SIDE) -> tuple[int, int]:
+    """(width, height): the portrait's size scaled to at most `max_side`, rounded to even numbers."""
+    scale = min(1.0, max_side / max(image_size))
+    return tuple(max(2, 2 * round(side * scale / 2)) for side in image_size)
+
+
+def make_motion(puppet: Puppet, audio_path: Path | None, options: VideoOptions) -> Motion:
+    """The puppet's motion from the chosen source, at options.fps."""
+    rest = puppet.rig.landmarks
+    if options.motion in MOTION_SOURCES:
+        if audio_path is None:
+            raise PuppetError("the loudness motion needs an audio file")
+        samples = audio.load(audio_path)
+        audio.check_audible(samples, str(audio_path))
+        speech = loudness_motion(samples, audio.ANALYSIS_RATE, rest, options.fps, options.loudness)
+        activity = _activity(speech)
+        return speech + life_motion(len(speech), options.fps, rest, options.life, activity)
+    landmarks, fps = track.read(options.motion)
+    if abs(fps - options.fps) > 1e-6:
+        raise PuppetError(f"{options.motion} is at {fps:g} fps; render it with --fps {fps:g}")
+    return track.motion_from_track(landmarks, rest, fps)
+
+
+def _activity(speech: Motion) -> np.ndarray:
+    """(T,) float32 in [0, 1]: how much the mouth is moving, to liven idle head motion while talking."""
+    jaw = np.abs(speech.offsets[:, 57, 1])
+    return np.clip(jaw / max(float(jaw.max()), 1e-6), 0, 1).astype(np.float32)
+
+
+def render(
+    puppet: Puppet,
+    audio_path: Path | None,
+    output: Path,
+    options: VideoOptions = VideoOptions(),
+    force: bool = False,
+    landmarks_out: Path | None = None,
+    progress: bool = True,
+) -> Path:
+    """Render the talking puppet to `output` (a video file or a folder of RGBA PNG frames)."""
+    output = export.check_output(output, force)
+    if landmarks_out is not None:
+        landmarks_out = _check_track_output(landmarks_out, force)
+    motion = make_motion(puppet, audio_path, options)
+    size = options.size or output_size(puppet.rig.image_size)
+    background = options.background or (Background() if output.suffix == "" else Background((1.0, 1.0, 1.0, 1.0)))
+
+    ctx = headless_context()
+    try:
+        renderer = PuppetRenderer(ctx, puppet.image, puppet.rig)
+        canvas = Canvas(ctx, size, options.samples)
+        with export.open_output(output, size, options.fps, audio_path=audio_path, force=force) as out:
+            bar = tqdm(total=len(motion), unit="frame", desc=f"rendering {output.name}", disable=not progress, leave=False)
+            for start in range(0, len(motion), CHUNK_FRAMES):
+                for positions in puppet.rig.animate(motion[start : start + CHUNK_FRAMES]):
+                    canvas.begin(background)
+                    renderer.draw(positions, size)
+                    out.send(canvas.read())
+                    bar.update()
+            bar.close()
+    finally:
+        ctx.release()
+    if landmarks_out is not None:
+        track.write(landmarks_out, posed_landmarks(puppet.rig.landmarks, motion), motion.fps)
+    return output
+
+
+
+def _check_track_output(path: Path, force: bool) -> Path:
+    """The --landmarks-out path, checked before any work: an .npz in an existing folder."""
+    path = Path(path)
+    if path.suffix.lower() != ".npz":
+        raise PuppetError(f"--landmarks-out must name an .npz file, not {path}")
+    if not path.parent.is_dir():
+        raise PuppetError(f"output folder does not exist: {path.parent}")
+    if path.exists() and not force:
+        raise PuppetError(f"{path} exists; use --force to overwrite")
+    return path

@@ -1,0 +1,90 @@
+import numpy as np
+import pytest
+
+from puppet import landmarks as lm
+from puppet import rig as rigging
+from puppet.errors import PuppetError
+from puppet.motion import Motion
+
+from conftest import shared
+
+CARTOONS = ["bluehead.jpg", "cartoonM.png", "cuphead.png", "danbooru1.jpg", "draw.png", "girl.png"]
+
+
+def areas(rig, positions):
+    return rigging._signed_areas(positions, rig.triangles)
+
+
+def test_demo_rig_has_tagged_mouth_and_eyes_and_no_fold(demo):
+    rig = demo.rig
+    assert len(rig.mouth) == len(rigging.MOUTH_STRIP) and len(rig.eyes) == 8
+    assert set(rig.triangles[rig.mouth].ravel()) == set(lm.INNER_LIP)
+    assert set(rig.triangles[rig.eyes].ravel()) == set(lm.RIGHT_EYE) | set(lm.LEFT_EYE)
+    rest = areas(rig, rig.vertices[None, :, :2])[0]
+    assert (np.delete(rest, np.r_[rig.mouth, rig.eyes]) > 0).all()
+    assert not rig._folded(rig.vertices[None, :, :2])[0]
+
+
+def test_mesh_covers_the_whole_image_exactly(demo):
+    rig = demo.rig
+    width, height = rig.image_size
+    assert areas(rig, rig.vertices[None, :, :2])[0].sum() == pytest.approx(width * height, rel=1e-4)
+
+
+def test_head_turn_moves_outline_but_not_border(demo):
+    rig = demo.rig
+    motion = Motion.still(1, 25)
+    motion = Motion(motion.offsets, np.array([[0.0, 0.15, 0.05]], np.float32), motion.translation, 25)
+    moved = rig.animate(motion)[0] - rig.vertices[:, :2]
+    outline = slice(lm.N_LANDMARKS, lm.N_LANDMARKS + rig.n_outline)
+    border = slice(lm.N_LANDMARKS + rig.n_outline, None)
+    assert np.abs(moved[outline]).max() > 3
+    assert np.abs(moved[border]).max() == 0
+
+
+def test_fold_guard_scales_back_an_impossible_turn(demo):
+    rig = demo.rig
+    still = Motion.still(1, 25)
+    wild = Motion(still.offsets, np.array([[0.0, 1.4, 1.2]], np.float32), np.array([[900.0, 0.0]], np.float32), 25)
+    positions = rig.animate(wild)
+    assert not rig._folded(positions)[0]
+    assert np.abs(positions - rig.vertices[None, :, :2]).max() > 1  # scaled back, not frozen
+
+
+def test_lips_asked_to_cross_meet_instead(demo):
+    rig = demo.rig
+    motion = Motion.still(1, 25)
+    offsets = motion.offsets.copy()
+    offsets[0, [61, 62, 63], 1] += 0.3 * lm.face_scale(rig.landmarks)  # upper lip pushed below the lower
+    positions = rig.animate(Motion(offsets, motion.rotation, motion.translation, 25))[0]
+    for upper, lower in lm.INNER_LIP_PAIRS:
+        assert positions[lower, 1] >= positions[upper, 1] - 1e-3
+
+
+def test_crossed_lips_in_a_landmark_file_are_mended(demo):
+    points = demo.rig.landmarks.copy()
+    points[[61, 62, 63], 1] += 3  # upper inner lip drawn below the lower one
+    rig = rigging.build(points, demo.rig.image_size)
+    assert not rig._folded(rig.vertices[None, :, :2])[0]
+
+
+def test_scrambled_landmarks_are_refused(demo):
+    points = demo.rig.landmarks[np.random.default_rng(1).permutation(68)]
+    with pytest.raises(PuppetError):
+        rigging.build(points, demo.rig.image_size)
+
+
+@pytest.mark.parametrize("name", CARTOONS)
+def test_every_shared_cartoon_rigs_cleanly(name):
+    from puppet.image import load_image
+
+    image = load_image(shared("cartoons", name))
+    points = lm.load(shared("cartoons", name.rsplit(".", 1)[0] + "_landmarks.txt"))
+    rig = rigging.build(points, (image.shape[1], image.shape[0]))
+    assert not rig._folded(rig.vertices[None, :, :2])[0]
+    jaw_open = Motion.still(1, 25).offsets.copy()
+    jaw_open[0, list(range(55, 60)) + [65, 66, 67] + list(range(5, 12)), 1] += 0.3 * lm.face_scale(points)
+    opened = rig.animate(Motion(jaw_open, np.zeros((1, 3), np.float32), np.zeros((1, 2), np.float32), 25))
+    assert not rig._folded(opened)[0]
+    mouth = areas(rig, opened)[0][rig.mouth].sum()
+    assert mouth > areas(rig, rig.vertices[None, :, :2])[0][rig.mouth].sum()
