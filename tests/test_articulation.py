@@ -1,0 +1,140 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from puppet.articulation import JAW_OPEN_GAP, UNITS, blend, unit_offsets
+from puppet.landmarks import (
+    EYELID_PAIRS, INNER_LIP_PAIRS, JAW, LEFT_BROW, LEFT_EYE, MOUTH, NOSE, RIGHT_BROW, RIGHT_EYE, load, with_depth,
+)
+
+# Hand-placed landmarks of real cartoon portraits, beside the repository when available.
+CARTOONS = sorted((Path(__file__).resolve().parents[2] / "shared" / "media" / "cartoons").glob("*_landmarks.txt"))
+
+
+def drawn_face(centre=(256.0, 256.0), iod=100.0, tilt_degrees=0.0, mouth_gap=0.02):
+    """(68, 3) float32 rest landmarks of a drawn frontal face, image pixels; eyes `iod` px apart."""
+    arc = np.linspace(np.pi, 0.0, 17)
+    jaw = np.column_stack([np.cos(arc), 1.45 * np.sin(arc)])
+    brow = np.column_stack([np.linspace(-0.85, -0.2, 5), -0.3 - 0.08 * np.sin(np.linspace(0.3, 2.8, 5))])
+    nose = [(0, 0.05), (0, 0.25), (0, 0.45), (0, 0.62), (-0.2, 0.7), (-0.1, 0.74), (0, 0.76), (0.1, 0.74), (0.2, 0.7)]
+    eye = np.array([(-0.65, 0), (-0.55, -0.06), (-0.45, -0.06), (-0.35, 0), (-0.45, 0.05), (-0.55, 0.05)])
+    h = mouth_gap / 2
+    lips = [(-0.4, 1.0), (-0.25, 0.92), (-0.1, 0.88), (0, 0.9), (0.1, 0.88), (0.25, 0.92), (0.4, 1.0),
+            (0.25, 1.1), (0.1, 1.14), (0, 1.15), (-0.1, 1.14), (-0.25, 1.1),
+            (-0.32, 1.0), (-0.1, 1 - h), (0, 1 - h), (0.1, 1 - h), (0.32, 1.0), (0.1, 1 + h), (0, 1 + h), (-0.1, 1 + h)]
+    unit = np.concatenate([jaw, brow, brow[::-1] * (-1, 1), nose, eye, eye[[3, 2, 1, 0, 5, 4]] * (-1, 1), lips])
+    c, s = np.cos(np.radians(tilt_degrees)), np.sin(np.radians(tilt_degrees))
+    return with_depth(unit @ np.array([[c, s], [-s, c]]) * iod + np.asarray(centre))
+
+
+REST = drawn_face()
+OWN_PARTS = {  # the points each unit may move
+    "jaw_open": set(JAW) | set(MOUTH),
+    "lip_wide": set(MOUTH),
+    "lip_round": set(MOUTH),
+    "lip_press": set(MOUTH),
+    "smile": set(MOUTH) | set(JAW),
+    "blink_right": {37, 38, 40, 41},
+    "blink_left": {43, 44, 46, 47},
+    "brow_raise": set(RIGHT_BROW) | set(LEFT_BROW),
+    "brow_frown": set(RIGHT_BROW) | set(LEFT_BROW),
+}
+
+
+def inner_gap(points):
+    """Mean inner-lip opening (pixels) of (..., 68, 3) points on an upright face."""
+    return np.mean([points[..., lower, 1] - points[..., upper, 1] for upper, lower in INNER_LIP_PAIRS], axis=0)
+
+
+def test_every_unit_is_present_and_moves_only_its_own_part():
+    units = unit_offsets(REST)
+    assert set(units) == set(UNITS)
+    for name, offsets in units.items():
+        assert offsets.shape == (68, 3) and offsets.dtype == np.float32
+        moved = set(np.flatnonzero(np.abs(offsets).max(1) > 1e-6))
+        assert moved, name
+        assert moved <= OWN_PARTS[name], (name, sorted(moved - OWN_PARTS[name]))
+
+
+def test_jaw_open_parts_the_lips_by_a_third_of_the_eye_distance_and_leaves_eyes_brows_and_nose():
+    units = unit_offsets(REST)
+    opened = REST + units["jaw_open"]
+    assert inner_gap(opened) - inner_gap(REST) == pytest.approx(JAW_OPEN_GAP * 100.0, abs=0.5)
+    assert opened[57, 1] > REST[57, 1] + 25 and opened[8, 1] > REST[8, 1] + 20  # lower lip and chin drop
+    for part in (RIGHT_EYE, LEFT_EYE, RIGHT_BROW, LEFT_BROW, NOSE):
+        assert np.all(units["jaw_open"][list(part)] == 0)
+
+
+@pytest.mark.parametrize("name, pairs", [("blink_right", EYELID_PAIRS[:2]), ("blink_left", EYELID_PAIRS[2:])])
+def test_a_full_blink_closes_the_lids_exactly_and_a_half_blink_half_way(name, pairs):
+    offsets = unit_offsets(drawn_face(tilt_degrees=17.0))[name]
+    rest = drawn_face(tilt_degrees=17.0)
+    for upper, lower in pairs:
+        shut = rest + offsets
+        assert np.linalg.norm(shut[upper] - shut[lower]) < 1e-4
+        assert shut[lower, 1] < rest[lower, 1]  # the lower lid rises a little
+        half = rest + 0.5 * offsets
+        opening = np.linalg.norm(rest[upper] - rest[lower])
+        assert np.linalg.norm(half[upper] - half[lower]) == pytest.approx(opening / 2, rel=1e-4)
+
+
+def test_units_scale_with_the_face():
+    small, huge = unit_offsets(drawn_face(iod=20.0)), unit_offsets(drawn_face((900.0, 700.0), iod=400.0))
+    for name in UNITS:
+        np.testing.assert_allclose(huge[name], 20.0 * small[name], atol=1e-3, err_msg=name)
+
+
+def test_units_turn_with_a_tilted_face():
+    angle = np.radians(25.0)
+    turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    upright, tilted = unit_offsets(REST), unit_offsets(drawn_face(tilt_degrees=25.0))
+    for name in UNITS:
+        np.testing.assert_allclose(tilted[name][:, :2], upright[name][:, :2] @ turn.T, atol=1e-3, err_msg=name)
+        np.testing.assert_allclose(tilted[name][:, 2], upright[name][:, 2], atol=1e-3, err_msg=name)
+
+
+def test_lip_shapes_do_what_their_names_say():
+    units = unit_offsets(REST)
+    width = lambda points: points[54, 0] - points[48, 0]  # noqa: E731
+    assert width(REST + units["lip_wide"]) > width(REST) + 10
+    rounded = REST + units["lip_round"]
+    assert width(rounded) < width(REST) - 15 and rounded[51, 2] > REST[51, 2] + 5  # narrower, pushed forward
+    smiling = REST + units["smile"]
+    assert smiling[48, 1] < REST[48, 1] - 5 and smiling[54, 1] < REST[54, 1] - 5 and width(smiling) > width(REST)
+    assert np.all((REST + units["brow_raise"])[17:27, 1] < REST[17:27, 1] - 5)
+    frowning = REST + units["brow_frown"]
+    assert frowning[22, 0] - frowning[21, 0] < REST[22, 0] - REST[21, 0] - 5
+
+
+def test_lip_press_closes_an_open_mouth():
+    rest = drawn_face(mouth_gap=0.2)
+    pressed = rest + unit_offsets(rest)["lip_press"]
+    assert inner_gap(rest) > 19 and abs(inner_gap(pressed)) < 1e-3
+    assert pressed[57, 1] - pressed[51, 1] < rest[57, 1] - rest[51, 1] - 20  # lips thinner as well as closed
+
+
+def test_blend_is_the_weighted_sum_per_frame():
+    units = unit_offsets(REST)
+    jaw = np.array([0.0, 0.5, 1.0], np.float32)
+    blink = np.array([1.0, 0.0, 0.25], np.float32)
+    offsets = blend(units, {"jaw_open": jaw, "blink_left": blink})
+    assert offsets.shape == (3, 68, 3) and offsets.dtype == np.float32
+    for t in range(3):
+        np.testing.assert_allclose(offsets[t], jaw[t] * units["jaw_open"] + blink[t] * units["blink_left"], atol=1e-5)
+    with pytest.raises(KeyError):
+        blend(units, {"wink": jaw})
+
+
+@pytest.mark.skipif(not CARTOONS, reason="../shared/media/cartoons is not here")
+@pytest.mark.parametrize("path", CARTOONS, ids=lambda path: path.stem)
+def test_hand_placed_cartoon_faces_blink_and_press_shut(path):
+    rest = with_depth(load(path))
+    units = unit_offsets(rest)
+    assert all(np.all(np.isfinite(offsets)) for offsets in units.values())
+    shut = rest + units["blink_right"] + units["blink_left"]
+    pressed = rest + units["lip_press"]
+    for upper, lower in EYELID_PAIRS:
+        assert np.linalg.norm(shut[upper] - shut[lower]) < 1e-3
+    for upper, lower in INNER_LIP_PAIRS:
+        assert np.linalg.norm(pressed[upper] - pressed[lower]) < 1e-3
