@@ -18,7 +18,14 @@ import moderngl
 import numpy as np
 
 from puppet import audio, bundle, video
-from puppet.renderer import Background, Canvas, PuppetRenderer, headless_context, premultiply, shader_source
+from puppet.renderer import (
+    Background,
+    Canvas,
+    PuppetRenderer,
+    headless_context,
+    premultiply,
+    shader_source,
+)
 
 SIZES = {"512": (512, 512), "1080": (1920, 1080)}
 EXPORT_SIZE = (512, 512)

@@ -4,11 +4,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import drawn_face
 from scipy.io import wavfile
 
 from puppet import audio, bundle
 from puppet.landmarks import INNER_LIP_PAIRS, MOUTH, face_scale, load, with_depth
-from puppet.loudness import MAX_NOD_DEGREES, LoudnessOptions, frame_count, loudness_motion
+from puppet.loudness import (
+    MAX_NOD_DEGREES,
+    LoudnessOptions,
+    frame_count,
+    loudness_motion,
+)
 
 RATE = 16000
 FPS = 25.0
@@ -16,21 +22,6 @@ FPS = 25.0
 SPEECH = sorted((Path(__file__).resolve().parents[2] / "shared" / "media" / "speech").glob("*.json"))
 SPEECH = [path for path in SPEECH if not path.name.endswith(".phone.json")]
 
-
-def drawn_face(centre=(256.0, 256.0), iod=100.0, tilt_degrees=0.0, mouth_gap=0.02):
-    """(68, 3) float32 rest landmarks of a drawn frontal face, image pixels; eyes `iod` px apart."""
-    arc = np.linspace(np.pi, 0.0, 17)
-    jaw = np.column_stack([np.cos(arc), 1.45 * np.sin(arc)])
-    brow = np.column_stack([np.linspace(-0.85, -0.2, 5), -0.3 - 0.08 * np.sin(np.linspace(0.3, 2.8, 5))])
-    nose = [(0, 0.05), (0, 0.25), (0, 0.45), (0, 0.62), (-0.2, 0.7), (-0.1, 0.74), (0, 0.76), (0.1, 0.74), (0.2, 0.7)]
-    eye = np.array([(-0.65, 0), (-0.55, -0.06), (-0.45, -0.06), (-0.35, 0), (-0.45, 0.05), (-0.55, 0.05)])
-    h = mouth_gap / 2
-    lips = [(-0.4, 1.0), (-0.25, 0.92), (-0.1, 0.88), (0, 0.9), (0.1, 0.88), (0.25, 0.92), (0.4, 1.0),
-            (0.25, 1.1), (0.1, 1.14), (0, 1.15), (-0.1, 1.14), (-0.25, 1.1),
-            (-0.32, 1.0), (-0.1, 1 - h), (0, 1 - h), (0.1, 1 - h), (0.32, 1.0), (0.1, 1 + h), (0, 1 + h), (-0.1, 1 + h)]
-    unit = np.concatenate([jaw, brow, brow[::-1] * (-1, 1), nose, eye, eye[[3, 2, 1, 0, 5, 4]] * (-1, 1), lips])
-    c, s = np.cos(np.radians(tilt_degrees)), np.sin(np.radians(tilt_degrees))
-    return with_depth(unit @ np.array([[c, s], [-s, c]]) * iod + np.asarray(centre))
 
 
 

@@ -1,7 +1,12 @@
 import numpy as np
 
 from puppet.motion import Motion
-from puppet.pose import angles_from_matrices, head_pivot, posed_landmarks, rotation_matrices
+from puppet.pose import (
+    angles_from_matrices,
+    head_pivot,
+    posed_landmarks,
+    rotation_matrices,
+)
 
 
 def test_angles_round_trip():

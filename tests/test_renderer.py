@@ -1,9 +1,15 @@
 import numpy as np
-import pytest
 
 from puppet import landmarks as lm
 from puppet.motion import Motion
-from puppet.renderer import Background, Canvas, PuppetRenderer, fit, premultiply, unpremultiply
+from puppet.renderer import (
+    Background,
+    Canvas,
+    PuppetRenderer,
+    fit,
+    premultiply,
+    unpremultiply,
+)
 
 WHITE = Background((1.0, 1.0, 1.0, 1.0))
 

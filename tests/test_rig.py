@@ -1,12 +1,11 @@
 import numpy as np
 import pytest
+from conftest import shared
 
 from puppet import landmarks as lm
 from puppet import rig as rigging
 from puppet.errors import PuppetError
 from puppet.motion import Motion
-
-from conftest import shared
 
 CARTOONS = ["bluehead.jpg", "cartoonM.png", "cuphead.png", "danbooru1.jpg", "draw.png", "girl.png"]
 
