@@ -60,11 +60,11 @@ def load(path: str | Path, landmarks: str | Path | None = None, points: np.ndarr
     elif points is not None:
         from puppet.template import fit
 
-        points68 = fit(points, size)
+        points68 = lm.clamp_to_image(fit(points, size), size)
     else:
         from puppet.detect import detect
 
-        points68 = detect(image, str(path))
+        points68 = lm.clamp_to_image(detect(image, str(path)), size)
     return Puppet(image, build(points68, size), path.stem)
 
 

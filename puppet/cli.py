@@ -6,6 +6,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from puppet.errors import PuppetError
+from puppet.template import POINTS_HELP
 
 NAMED_COLOURS = {
     "white": "#ffffff",
@@ -15,11 +16,6 @@ NAMED_COLOURS = {
     "magenta": "#ff00ff",
     "grey": "#808080",
 }
-POINTS_HELP = (
-    "rig by hand from 5 points 'x,y' in image pixels, in this order: the eye centre on the image's "
-    "left, the eye centre on the image's right, the nose tip, the mouth corner on the image's left, "
-    "the mouth corner on the image's right"
-)
 
 
 def parse_size(text: str) -> tuple[int, int] | int:
@@ -102,7 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_rigging_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--landmarks", type=Path, help="68-point landmark file: text (68 rows 'x y [z]'), .json or .npy, image pixels")
-    group.add_argument("--points", nargs=5, metavar="X,Y", help=POINTS_HELP)
+    group.add_argument("--points", nargs=5, metavar="X,Y", help=POINTS_HELP + " (try this on cartoons no detector understands)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -139,6 +139,14 @@ def validate(points: np.ndarray, source: str = "landmarks", image_size: tuple[in
     return points
 
 
+def clamp_to_image(points: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """(68, D) points moved inside the image: a detected or fitted face may reach past a tight crop."""
+    points = np.array(points, dtype=np.float32)
+    points[:, 0] = np.clip(points[:, 0], 0, image_size[0])
+    points[:, 1] = np.clip(points[:, 1], 0, image_size[1])
+    return points
+
+
 def save_txt(path: str | Path, points: np.ndarray) -> None:
     """Write (68, 2|3) points as 68 rows `x y [z]`, the format `load` reads."""
     np.savetxt(path, np.asarray(points, dtype=np.float32), fmt="%.3f")
