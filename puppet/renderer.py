@@ -75,7 +75,7 @@ class PuppetRenderer:
         index = self.ctx.buffer(np.ascontiguousarray(triangles, dtype=np.int32).tobytes())
         return self.ctx.vertex_array(
             self.program,
-            [(self.rest_buffer, "2f", "in_rest"), (self.offset_buffer, "2f", "in_offset"), (self.mouth_buffer, "2f", "in_mouth")],
+            [(self.rest_buffer, "2f", "in_rest"), (self.offset_buffer, "2f", "in_offset"), (self.mouth_buffer, "3f", "in_mouth")],
             index_buffer=index,
             index_element_size=4,
         )

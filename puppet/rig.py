@@ -41,10 +41,13 @@ RINGS = (tuple(lm.INNER_LIP), tuple(lm.RIGHT_EYE), tuple(lm.LEFT_EYE))
 # fraction of the way from the lip seam toward the outer lip.
 TOPOLOGY_MOUTH_OPENING = 0.4
 
-# Mouth-interior coordinates of the inner-lip points: (across from corner to corner, from the
-# upper lip (0) to the lower lip (1)); the fragment shader paints teeth and tongue from them.
-MOUTH_COORDS = {60: (0.0, 0.5), 61: (0.25, 0.0), 62: (0.5, 0.0), 63: (0.75, 0.0),
-                64: (1.0, 0.5), 65: (0.75, 1.0), 66: (0.5, 1.0), 67: (0.25, 1.0)}
+# Mouth-interior coordinates of the inner-lip points: (across, from corner 0 to corner 1;
+# "below the upper lip", 0 on the upper lip and the corners, 1 on the lower lip; "above the
+# lower lip", 0 on the lower lip and the corners, 1 on the upper lip). Interpolated over the
+# mouth strip, the last two vanish exactly on the lips, so the fragment shader can paint teeth
+# and tongue and soften the lip edge to the pixel.
+MOUTH_COORDS = {60: (0.0, 0.0, 0.0), 61: (0.25, 0.0, 1.0), 62: (0.5, 0.0, 1.0), 63: (0.75, 0.0, 1.0),
+                64: (1.0, 0.0, 0.0), 65: (0.75, 1.0, 0.0), 66: (0.5, 1.0, 0.0), 67: (0.25, 1.0, 0.0)}
 
 # Fold guard: a triangle (other than mouth and eye triangles, which may close) must keep this
 # fraction of its rest area; otherwise the frame's head motion, then its offsets, are scaled back.
@@ -96,8 +99,8 @@ class Rig:
 
     @property
     def mouth_coords(self) -> np.ndarray:
-        """(N, 2) float32 mouth-interior coordinates (zero off the inner lip), see MOUTH_COORDS."""
-        coords = np.zeros((len(self.vertices), 2), np.float32)
+        """(N, 3) float32 mouth-interior coordinates (zero off the inner lip), see MOUTH_COORDS."""
+        coords = np.zeros((len(self.vertices), 3), np.float32)
         for index, uv in MOUTH_COORDS.items():
             coords[index] = uv
         return coords

@@ -9,10 +9,10 @@ uniform vec2 u_shift;        // framebuffer pixels, added after scaling
 
 in vec2 in_rest;       // rest position, portrait pixels (origin top-left, y down)
 in vec2 in_offset;     // displacement this frame, portrait pixels
-in vec2 in_mouth;      // mouth-interior coordinates (across, upper lip 0 -> lower lip 1)
+in vec3 in_mouth;      // mouth-interior coordinates (see puppet/rig.py MOUTH_COORDS)
 
 out vec2 v_uv;
-out vec2 v_mouth;
+out vec3 v_mouth;
 
 void main() {
     vec2 pixel = (in_rest + in_offset) * u_scale + u_shift;
