@@ -3,3 +3,8 @@
 
 class PuppetError(Exception):
     """Bad input or an impossible request; the message says what is wrong and what to do."""
+
+
+def reason(error: Exception) -> str:
+    """The one-line reason an OS or FFmpeg error gives, without errno and file-name clutter."""
+    return getattr(error, "strerror", None) or str(error)
