@@ -42,6 +42,9 @@ X264_PRESETS = (
 # "veryfast" halves the size but runs ~23× (~19× with AAC), too close to the 20× target.
 DEFAULT_PRESET = "superfast"
 DEFAULT_CRF = 20  # x264 constant quality (0 lossless … 51 worst): 54 dB PSNR on flat-shaded frames
+# x264 threads: half the cores, leaving the rest to the renderer that feeds it (on 2 cores
+# one encoder thread beats x264's default of 3 by ~10 % end to end).
+ENCODER_THREADS = max(1, (os.cpu_count() or 2) // 2)
 AAC_RATES = (16000, 22050, 24000, 32000, 44100, 48000)  # Hz: common rates the audio keeps as they are
 AAC_FALLBACK_RATE = 48000  # Hz: audio at any other rate is resampled to this
 AAC_BIT_RATE_PER_CHANNEL = 64_000  # bit/s: transparent for speech
@@ -205,7 +208,7 @@ class VideoWriter(_AtomicOutput):
         width, height = self._size
         self._video = self._container.add_stream(
             "libx264", rate=self._fps, width=width, height=height, pix_fmt="yuv420p",
-            options={"crf": str(crf), "preset": preset},
+            options={"crf": str(crf), "preset": preset, "threads": str(ENCODER_THREADS)},
         )
         self._video.codec_context.colorspace = AVCOL_SPC_SMPTE170M
         self._video.codec_context.color_range = ColorRange.MPEG

@@ -14,6 +14,8 @@ import numpy as np
 from puppet.errors import PuppetError
 from puppet.rig import Rig
 
+MIPMAP_BELOW_SCALE = 0.75  # portrait pixels per output pixel below which mipmaps are sampled
+
 
 def shader_source(name: str) -> str:
     """The text of a GLSL file from the installed `shaders/` folder."""
@@ -52,33 +54,47 @@ class PuppetRenderer:
             raise PuppetError(f"the rig is for a {rig.image_size[0]}x{rig.image_size[1]} image, not {width}x{height}")
         self.ctx = ctx
         self.rig = rig
-        self.program = ctx.program(vertex_shader=shader_source("puppet.vert"), fragment_shader=shader_source("puppet.frag"))
+        vertex_shader = shader_source("puppet.vert")
+        self.skin_program = ctx.program(vertex_shader=vertex_shader, fragment_shader=shader_source("skin.frag"))
+        self.mouth_program = ctx.program(vertex_shader=vertex_shader, fragment_shader=shader_source("mouth.frag"))
         self.texture = ctx.texture((width, height), 4, np.ascontiguousarray(premultiply(image)).tobytes())
-        self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.texture.build_mipmaps()
         self.texture.repeat_x = self.texture.repeat_y = False
-        rest = rig.vertices[:, :2].astype(np.float32)
-        self.rest = rest
-        self.rest_buffer = ctx.buffer(rest.tobytes())
-        self.offset_buffer = ctx.buffer(reserve=rest.nbytes, dynamic=True)
+        self.rest = rig.vertices[:, :2].astype(np.float32)
+        self.rest_buffer = ctx.buffer(self.rest.tobytes())
+        self.offset_buffer = ctx.buffer(reserve=self.rest.nbytes, dynamic=True)
         self.mouth_buffer = ctx.buffer(rig.mouth_coords.tobytes())
-        skin = np.delete(rig.triangles, rig.mouth, axis=0) if rig.mouth_style.interior == "cavity" else rig.triangles
-        self.skin = self._vertex_array(skin)
-        self.mouth = self._vertex_array(rig.triangles[rig.mouth])
+        self.paint_mouth = rig.mouth_style.interior == "cavity"
+        skin = np.delete(rig.triangles, rig.mouth, axis=0) if self.paint_mouth else rig.triangles
+        self.skin = self._vertex_array(self.skin_program, skin)
+        self.mouth = self._vertex_array(self.mouth_program, rig.triangles[rig.mouth])
         style = rig.mouth_style
-        self.program["u_image_size"].value = (float(width), float(height))
-        self.program["u_cavity"].value = tuple(style.cavity)
-        self.program["u_teeth"].value = tuple(style.teeth)
-        self.program["u_tongue"].value = tuple(style.tongue)
+        for program in (self.skin_program, self.mouth_program):
+            program["u_image_size"].value = (float(width), float(height))
+            program["u_texture"].value = 0
+        self.mouth_program["u_cavity"].value = tuple(style.cavity)
+        self.mouth_program["u_teeth"].value = tuple(style.teeth)
+        self.mouth_program["u_tongue"].value = tuple(style.tongue)
+        self.target_size = None
 
-    def _vertex_array(self, triangles: np.ndarray) -> moderngl.VertexArray:
+    def _vertex_array(self, program: moderngl.Program, triangles: np.ndarray) -> moderngl.VertexArray:
         index = self.ctx.buffer(np.ascontiguousarray(triangles, dtype=np.int32).tobytes())
-        return self.ctx.vertex_array(
-            self.program,
-            [(self.rest_buffer, "2f", "in_rest"), (self.offset_buffer, "2f", "in_offset"), (self.mouth_buffer, "3f", "in_mouth")],
-            index_buffer=index,
-            index_element_size=4,
-        )
+        buffers = [(self.rest_buffer, "2f", "in_rest"), (self.offset_buffer, "2f", "in_offset")]
+        if "in_mouth" in program:
+            buffers.append((self.mouth_buffer, "3f", "in_mouth"))
+        return self.ctx.vertex_array(program, buffers, index_buffer=index, index_element_size=4)
+
+    def _frame(self, target_size: tuple[int, int]) -> None:
+        """Set up drawing into a target of a new size (done once per size, not per frame)."""
+        self.target_size = target_size
+        scale, shift = fit(self.rig.image_size, target_size)
+        # Trilinear mipmapping only where the portrait is shrunk: it costs a lot on a CPU rasteriser.
+        minify = moderngl.LINEAR_MIPMAP_LINEAR if scale[0] < MIPMAP_BELOW_SCALE else moderngl.LINEAR
+        self.texture.filter = (minify, moderngl.LINEAR)
+        for program in (self.skin_program, self.mouth_program):
+            program["u_target_size"].value = (float(target_size[0]), float(target_size[1]))
+            program["u_scale"].value = tuple(scale)
+            program["u_shift"].value = tuple(shift)
 
     def draw(self, positions: np.ndarray, target_size: tuple[int, int]) -> None:
         """Draw into the bound framebuffer of `target_size` (width, height) pixels.
@@ -87,19 +103,13 @@ class PuppetRenderer:
         The portrait is fitted into the target, centred, aspect kept.
         """
         self.offset_buffer.write(np.ascontiguousarray(positions - self.rest, dtype=np.float32).tobytes())
-        scale, shift = fit(self.rig.image_size, target_size)
-        self.program["u_target_size"].value = (float(target_size[0]), float(target_size[1]))
-        self.program["u_scale"].value = tuple(scale)
-        self.program["u_shift"].value = tuple(shift)
+        if target_size != self.target_size:
+            self._frame(target_size)
         self.ctx.enable(moderngl.BLEND)
-        self.ctx.disable(moderngl.CULL_FACE | moderngl.DEPTH_TEST)
         self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
         self.texture.use(0)
-        self.program["u_texture"].value = 0
-        self.program["u_layer"].value = 0
         self.skin.render(moderngl.TRIANGLES)
-        if self.rig.mouth_style.interior == "cavity":
-            self.program["u_layer"].value = 1
+        if self.paint_mouth:
             self.mouth.render(moderngl.TRIANGLES)
 
 

@@ -29,7 +29,7 @@ class VideoOptions:
     size: tuple[int, int] | None = None  # output (width, height); None: the portrait's size, capped
     fps: float = DEFAULT_FPS  # output frames per second
     background: Background | None = None  # None: transparent for PNG frames, white for video
-    samples: int = 4  # MSAA samples per pixel
+    samples: int = 0  # MSAA samples per pixel (0: none; the mouth rim is smoothed in the shader)
     motion: str = "loudness"  # a built-in source name or a track file (.npz)
     loudness: LoudnessOptions = field(default_factory=LoudnessOptions)  # the baseline's settings
     life: LifeOptions = field(default_factory=LifeOptions)  # blinks, idle head motion, breathing

@@ -12,7 +12,7 @@ in vec2 in_offset;     // displacement this frame, portrait pixels
 in vec3 in_mouth;      // mouth-interior coordinates (see puppet/rig.py MOUTH_COORDS)
 
 out vec2 v_uv;
-out vec3 v_mouth;
+out vec3 v_mouth;      // used by mouth.frag only
 
 void main() {
     vec2 pixel = (in_rest + in_offset) * u_scale + u_shift;

@@ -1,6 +1,5 @@
 import av
 import numpy as np
-import pytest
 
 from puppet import audio, track, video
 from puppet.renderer import Background

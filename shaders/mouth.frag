@@ -1,10 +1,8 @@
 #version 330
-// Layer 0: the portrait (a premultiplied-alpha texture). Layer 1: the inside of the mouth:
-// upper teeth under the upper lip, the tongue rising from the lower lip, a dark cavity
+// The inside of the mouth, drawn over the mouth triangles when the lips part: upper teeth under the upper lip, the tongue rising from the lower lip, a dark cavity
 // between, darker toward the corners. Within about a pixel of the lips the interior fades
 // into the portrait's own lip edge, so the opening has a smooth rim without multisampling.
 uniform sampler2D u_texture;
-uniform int u_layer;
 uniform vec3 u_cavity;
 uniform vec3 u_teeth;
 uniform vec3 u_tongue;
@@ -15,10 +13,6 @@ out vec4 f_color;
 
 void main() {
     vec4 portrait = texture(u_texture, v_uv);
-    if (u_layer == 0) {
-        f_color = portrait;
-        return;
-    }
     float below_upper = v_mouth.y;
     float above_lower = v_mouth.z;
     float depth = below_upper / max(below_upper + above_lower, 1e-4);  // 0 upper lip .. 1 lower lip

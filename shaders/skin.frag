@@ -1,0 +1,10 @@
+#version 330
+// The portrait itself: a premultiplied-alpha texture, sampled where the vertex shader says.
+uniform sampler2D u_texture;
+
+in vec2 v_uv;
+out vec4 f_color;
+
+void main() {
+    f_color = texture(u_texture, v_uv);
+}
