@@ -9,10 +9,11 @@ that dlib's integer landmark coordinates carry sub-pixel precision in the origin
 Coordinates: image pixels, pixel centres at integer positions, origin top-left, x right, y down.
 """
 import functools
+import importlib.util
+from pathlib import Path
 
 import cv2
 import dlib
-import face_recognition_models
 import numpy as np
 
 from puppet.errors import PuppetError
@@ -41,6 +42,21 @@ MEAN_SHAPE_MARGIN = MEAN_SHAPE_BOX // 4  # 1000 px: a 6000 px square image
 GREY = 128
 
 
+def _model_file(name: str) -> str:
+    """Path of a dlib model shipped in the `face-recognition-models` package.
+
+    Found without importing that package: its __init__ needs pkg_resources, which recent
+    setuptools no longer has.
+    """
+    spec = importlib.util.find_spec("face_recognition_models")
+    if spec is None or not spec.submodule_search_locations:
+        raise PuppetError("face detection needs the face-recognition-models package: pip install face-recognition-models")
+    path = Path(spec.submodule_search_locations[0]) / "models" / name
+    if not path.is_file():
+        raise PuppetError(f"face-recognition-models is installed without {name}; reinstall it")
+    return str(path)
+
+
 @functools.cache
 def _hog_detector() -> dlib.fhog_object_detector:
     return dlib.get_frontal_face_detector()
@@ -48,12 +64,12 @@ def _hog_detector() -> dlib.fhog_object_detector:
 
 @functools.cache
 def _cnn_detector() -> dlib.cnn_face_detection_model_v1:
-    return dlib.cnn_face_detection_model_v1(face_recognition_models.cnn_face_detector_model_location())
+    return dlib.cnn_face_detection_model_v1(_model_file("mmod_human_face_detector.dat"))
 
 
 @functools.cache
 def _shape_predictor() -> dlib.shape_predictor:
-    return dlib.shape_predictor(face_recognition_models.pose_predictor_model_location())
+    return dlib.shape_predictor(_model_file("shape_predictor_68_face_landmarks.dat"))
 
 
 @functools.cache
