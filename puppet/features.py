@@ -47,16 +47,22 @@ def _mel_to_hz(mel: np.ndarray) -> np.ndarray:
     return np.where(mel >= 15.0, 1000.0 * np.exp((mel - 15.0) * (np.log(6.4) / 27.0)), mel * (200.0 / 3))
 
 
-@functools.cache
-def mel_filters() -> np.ndarray:
-    """(N_MELS, N_FFT // 2 + 1) float32 triangular filters, each with unit area in Hz."""
-    bins = np.linspace(0, SAMPLE_RATE / 2, N_FFT // 2 + 1)
-    edges = _mel_to_hz(np.linspace(_hz_to_mel(FMIN), _hz_to_mel(FMAX), N_MELS + 2))
+def mel_filterbank(sample_rate: int, n_fft: int, n_mels: int, fmin: float, fmax: float) -> np.ndarray:
+    """(n_mels, n_fft // 2 + 1) float32 triangular filters on Slaney's mel scale, each with unit
+    area in Hz (the same filters as librosa.filters.mel with its defaults)."""
+    bins = np.linspace(0, sample_rate / 2, n_fft // 2 + 1)
+    edges = _mel_to_hz(np.linspace(_hz_to_mel(fmin), _hz_to_mel(fmax), n_mels + 2))
     lower, centre, upper = edges[:-2, None], edges[1:-1, None], edges[2:, None]
     rising = (bins - lower) / (centre - lower)
     falling = (upper - bins) / (upper - centre)
     filters = np.maximum(0, np.minimum(rising, falling)) * (2.0 / (upper - lower))
     return filters.astype(np.float32)
+
+
+@functools.cache
+def mel_filters() -> np.ndarray:
+    """(N_MELS, N_FFT // 2 + 1) float32: the predictor's filters."""
+    return mel_filterbank(SAMPLE_RATE, N_FFT, N_MELS, FMIN, FMAX)
 
 
 def frame_count(n_samples: int) -> int:
