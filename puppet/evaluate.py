@@ -1,0 +1,157 @@
+"""Scores for lip-sync motion: MakeItTalk's metrics (§5.3) on held-out synthetic voices and on
+real talking videos, for any motion source beside the baselines.
+
+Every source is a function from 16 kHz speech to canonical offsets `(T, 68, 3)` at MOTION_FPS
+(inter-ocular-distance units, head frame; see `puppet.visemes.canonical_rest`). Real videos are
+tracked with the project's own detector; each frame is aligned to the canonical face by a
+similarity fit on the stable points (eye corners, nose), which removes head pose, and the
+speaker's own rest face is the clip's per-landmark median: a prediction is that rest plus the
+source's offsets (q + Δq, as in the paper).
+
+Metrics (lower is better, except the correlation):
+- D-LL / D-VL: mean distance of jaw and lip landmarks / of their frame-to-frame velocities,
+  as a percentage of the reference's widest mouth (corner to corner) in the clip;
+- D-A: mean difference of the inner-mouth area, as a percentage of the reference's largest;
+- D-L / D-V: the same as D-LL / D-VL over all 68 landmarks, as a percentage of the face width;
+- D-Rot: mean head-rotation difference in degrees (synthetic voices only, where it is known);
+- lip correlation: Pearson correlation of predicted and real inner-lip opening.
+"""
+from pathlib import Path
+from typing import Callable
+
+import av
+import numpy as np
+
+from puppet import audio
+from puppet import landmarks as lm
+from puppet.detect import track
+from puppet.errors import PuppetError
+from puppet.features import MOTION_FPS
+
+Source = Callable[[np.ndarray], np.ndarray]  # (N,) float32 16 kHz → (T, 68, 3) canonical offsets
+JAW_AND_LIPS = list(lm.JAW) + list(lm.MOUTH)
+STABLE_POINTS = [36, 39, 42, 45, 27, 28, 29, 30, 31, 33, 35]  # eye corners, nose: no speech motion
+
+
+def mouth_area(points: np.ndarray) -> np.ndarray:
+    """(T,) area of the inner-lip polygon (60–67) of (T, 68, ≥2) points (shoelace formula)."""
+    ring = points[:, list(lm.INNER_LIP), :2]
+    x, y = ring[..., 0], ring[..., 1]
+    return 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
+
+
+def lip_opening(points: np.ndarray) -> np.ndarray:
+    """(T,) mean distance between facing inner-lip points of (T, 68, ≥2) points."""
+    upper, lower = zip(*lm.INNER_LIP_PAIRS)
+    return np.linalg.norm(points[:, list(upper), :2] - points[:, list(lower), :2], axis=2).mean(axis=1)
+
+
+def metrics(predicted: np.ndarray, reference: np.ndarray) -> dict:
+    """D-LL, D-VL, D-A, D-L, D-V (%) and lip correlation of (T, 68, ≥2) predicted vs reference points."""
+    p, r = predicted[..., :2], reference[..., :2]
+    mouth_width = np.linalg.norm(r[:, 54] - r[:, 48], axis=1).max()
+    face_width = np.linalg.norm(r[:, 16] - r[:, 0], axis=1).max()
+    velocity = np.diff(p, axis=0) - np.diff(r, axis=0)
+    area = mouth_area(r)
+    opening_p, opening_r = lip_opening(p), lip_opening(r)
+    spread = opening_p.std() * opening_r.std()
+    return {
+        "D-LL": 100 * np.linalg.norm(p[:, JAW_AND_LIPS] - r[:, JAW_AND_LIPS], axis=2).mean() / mouth_width,
+        "D-VL": 100 * np.linalg.norm(velocity[:, JAW_AND_LIPS], axis=2).mean() / mouth_width,
+        "D-A": 100 * np.abs(mouth_area(p) - area).mean() / max(area.max(), 1e-9),
+        "D-L": 100 * np.linalg.norm(p - r, axis=2).mean() / face_width,
+        "D-V": 100 * np.linalg.norm(velocity, axis=2).mean() / face_width,
+        "lip_corr": float(np.mean((opening_p - opening_p.mean()) * (opening_r - opening_r.mean())) / spread) if spread > 0 else 0.0,
+    }
+
+
+def align_to(points: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(T, 68, 2) points moved by the per-frame similarity (rotation, scale, shift) that best maps
+    their STABLE_POINTS onto those of (68, 2) target."""
+    aligned = np.empty_like(points[..., :2])
+    dst = target[STABLE_POINTS, :2]
+    dst_centre = dst.mean(0)
+    for t, frame in enumerate(points[..., :2]):
+        src = frame[STABLE_POINTS]
+        src_centre = src.mean(0)
+        a, b = src - src_centre, dst - dst_centre
+        u, s, vt = np.linalg.svd(a.T @ b)
+        flip = np.diag([1.0, np.sign(np.linalg.det(u @ vt))])
+        rotation = u @ flip @ vt
+        scale = np.trace(np.diag(s) @ flip) / max(np.sum(a**2), 1e-12)
+        aligned[t] = (frame - src_centre) @ rotation * scale + dst_centre
+    return aligned
+
+
+def resample(sequence: np.ndarray, fps_in: float, fps_out: float, frames: int) -> np.ndarray:
+    """(frames, ...) linear interpolation in time of a (T, ...) sequence from fps_in to fps_out."""
+    t_out = np.arange(frames) / fps_out
+    t_in = np.arange(len(sequence)) / fps_in
+    flat = sequence.reshape(len(sequence), -1)
+    columns = [np.interp(t_out, t_in, flat[:, k]) for k in range(flat.shape[1])]
+    return np.stack(columns, axis=1).reshape((frames,) + sequence.shape[1:]).astype(np.float32)
+
+
+def video_reference(path: Path, cache: Path | None = None) -> tuple[np.ndarray, float, np.ndarray]:
+    """Real landmarks of a talking video: ((T, 68, 2) float32 pixels, fps, (N,) float32 16 kHz audio).
+
+    Tracking is slow (about 20 frames/s), so results are cached as `cache/NAME.npz` when given.
+    """
+    cached = cache / f"{path.stem}.npz" if cache else None
+    samples = audio.load(path)
+    if cached and cached.is_file():
+        data = np.load(cached)
+        return data["landmarks"], float(data["fps"]), samples
+    try:
+        with av.open(str(path)) as container:
+            stream = container.streams.video[0]
+            fps = float(stream.average_rate)
+            points = track(frame.to_ndarray(format="rgb24") for frame in container.decode(stream))
+    except (av.FFmpegError, IndexError) as error:
+        raise PuppetError(f"cannot read video frames from {path}: {error}") from None
+    if cached:
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(cached, landmarks=points, fps=fps)
+    return points, fps, samples
+
+
+def score_video(path: Path, sources: dict[str, Source], canonical: np.ndarray, cache: Path | None = None) -> dict:
+    """{source name: metrics} for one real video; canonical: (68, 3) canonical rest (IOD units)."""
+    points, fps, samples = video_reference(path, cache)
+    valid = ~np.isnan(points).any(axis=(1, 2))
+    aligned = align_to(points[valid], canonical)
+    rest = np.median(aligned, axis=0)
+    scores = {}
+    for name, source in sources.items():
+        offsets = resample(source(samples), MOTION_FPS, fps, len(points))[valid]
+        scores[name] = metrics(rest[None] + offsets[..., :2], aligned)
+    return scores
+
+
+def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sources: dict[str, Callable], canonical: np.ndarray) -> dict:
+    """{source name: metrics averaged over utterances} on held-out synthetic voices.
+
+    items: (samples (N,), target offsets (T, 68, 3), target rotation (T, 3)); a source returns
+    (offsets, rotation or None) for samples.
+    """
+    totals: dict[str, list[dict]] = {name: [] for name in sources}
+    for samples, offsets, rotation in items:
+        reference = canonical[None] + offsets
+        for name, source in sources.items():
+            predicted_offsets, predicted_rotation = source(samples)
+            frames = min(len(predicted_offsets), len(offsets))
+            scores = metrics(canonical[None] + predicted_offsets[:frames], reference[:frames])
+            if predicted_rotation is not None:
+                scores["D-Rot"] = float(np.degrees(np.abs(predicted_rotation[:frames] - rotation[:frames])).mean())
+            totals[name].append(scores)
+    return {name: {key: float(np.mean([s[key] for s in runs])) for key in runs[0]} for name, runs in totals.items() if runs}
+
+
+def format_table(title: str, scores: dict) -> str:
+    """A plain-text table of {source: {metric: value}}."""
+    keys = list(next(iter(scores.values())))
+    lines = [title, f"{'source':<12}" + "".join(f"{k:>10}" for k in keys)]
+    for name, values in scores.items():
+        lines.append(f"{name:<12}" + "".join(f"{values[k]:>10.3f}" for k in keys))
+    return "\n".join(lines)
+
