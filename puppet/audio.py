@@ -50,8 +50,18 @@ def load(path, sample_rate: int = ANALYSIS_RATE) -> np.ndarray:
 
     Raises PuppetError for a missing, unreadable or empty file and for decoding errors mid-file.
     """
-    chunks = [frame.to_ndarray().mean(axis=0) for frame in iter_resampled(path, sample_rate)]
-    samples = np.concatenate(chunks) if chunks else np.zeros(0, np.float32)
+    # Filled in place (sized from the declared duration, grown if that was short), so an hour of
+    # audio costs its own size in memory and not a list of frames besides.
+    samples = np.empty(int(probe(path).duration * sample_rate * 1.01) + sample_rate, np.float32)
+    count = 0
+    for frame in iter_resampled(path, sample_rate):
+        planes = frame.to_ndarray()
+        chunk = planes[0] if len(planes) == 1 else planes.mean(axis=0)
+        if count + len(chunk) > len(samples):
+            samples = np.resize(samples, max(2 * len(samples), count + len(chunk)))
+        samples[count : count + len(chunk)] = chunk
+        count += len(chunk)
+    samples = samples[:count]
     if not samples.size:
         raise PuppetError(f"{path} contains no audio samples")
     # Float files may hold values past full scale (or NaN); analysis expects [-1, 1].

@@ -35,6 +35,8 @@ MURMUR_BAND = (100.0, 400.0)  # Hz: voicing murmur, where nasals and closed vowe
 OPEN_BAND = (600.0, 1200.0)  # Hz: first formant of open vowels ("ah"), which rises as the jaw drops
 LOW_BAND = (200.0, 1200.0)  # Hz: first formant and the voice's body ("oo" puts its energy here)
 HIGH_BAND = (1500.0, 4000.0)  # Hz: second/third formants and fricatives ("ee", "s")
+BANDS = {"murmur": MURMUR_BAND, "open": OPEN_BAND, "low": LOW_BAND, "high": HIGH_BAND}
+CHUNK_FRAMES = 1000  # frames analysed at a time
 SHAPE_SPREAD_DB = 6.0  # a band balance this far from the clip's typical one gives full wide/round
 OPENNESS_LIMIT_DB = 12.0  # band balances further than this from the typical one count as this far
 CLOSED = 0.01  # smoothed opening (or emphasis) below this is exactly 0 (a 0.002 IOD lip gap at max_jaw: invisible)
@@ -76,13 +78,27 @@ def frame_count(n_samples: int, sample_rate: int, fps: float) -> int:
     return math.ceil(round(n_samples * fps / sample_rate, 9))
 
 
-def _frame_windows(samples: np.ndarray, sample_rate: int, fps: float, frames: int, lead: float) -> np.ndarray:
-    """(frames, W) float32 Hann-windowed audio centred `lead` s after each frame's middle (zeros outside the clip)."""
+def _frame_features(samples: np.ndarray, sample_rate: int, fps: float, frames: int, lead: float) -> tuple[np.ndarray, dict]:
+    """Per frame, from a Hann window centred `lead` s after the frame's middle (zeros outside the clip):
+    (T,) level in dBFS and {band name: (T,) energy} for BANDS. Computed CHUNK_FRAMES at a time,
+    so an hour of audio never holds more than a few megabytes of spectra."""
     width = max(round(ANALYSIS_SECONDS * sample_rate), round(sample_rate / fps))
-    centres = np.round(((np.arange(frames) + 0.5) / fps + lead) * sample_rate).astype(np.int64)
+    window = np.hanning(width).astype(np.float32)
+    hz = np.fft.rfftfreq(width, 1.0 / sample_rate)
+    masks = {name: (hz >= low) & (hz < high) for name, (low, high) in BANDS.items()}
     padded = np.concatenate([np.zeros(width, np.float32), samples, np.zeros(width, np.float32)])
-    starts = np.clip(centres - width // 2 + width, 0, len(padded) - width)
-    return padded[starts[:, None] + np.arange(width)] * np.hanning(width).astype(np.float32)
+    level = np.empty(frames, np.float64)
+    bands = {name: np.empty(frames, np.float64) for name in BANDS}
+    for start in range(0, frames, CHUNK_FRAMES):
+        index = np.arange(start, min(start + CHUNK_FRAMES, frames))
+        centres = np.round(((index + 0.5) / fps + lead) * sample_rate).astype(np.int64)
+        starts = np.clip(centres - width // 2 + width, 0, len(padded) - width)
+        windows = padded[starts[:, None] + np.arange(width)] * window
+        level[index] = 10.0 * np.log10((windows**2).sum(1) / (window**2).sum() + LEVEL_FLOOR)
+        power = np.abs(np.fft.rfft(windows, axis=1)) ** 2
+        for name, mask in masks.items():
+            bands[name][index] = power[:, mask].sum(1) + LEVEL_FLOOR
+    return level, bands
 
 
 def _follow(target: np.ndarray, fps: float, attack: float, release: float) -> np.ndarray:
@@ -112,33 +128,24 @@ def _opening(level_db: np.ndarray, gate_db: float, options: LoudnessOptions) -> 
     return np.clip(options.sensitivity * eased / full, 0.0, 1.0)
 
 
-def _band_balance(power: np.ndarray, hz: np.ndarray, upper: tuple, lower: tuple, voiced: np.ndarray) -> np.ndarray:
-    """(T,) dB: energy in the `upper` band over the `lower` band, minus its median over voiced frames.
-
-    power: (T, F) power spectra; hz: (F,) their frequencies; voiced: (T,) bool.
-    """
-    def band(limits):
-        return power[:, (hz >= limits[0]) & (hz < limits[1])].sum(1) + LEVEL_FLOOR
-
-    balance = 10.0 * np.log10(band(upper) / band(lower))
+def _band_balance(upper: np.ndarray, lower: np.ndarray, voiced: np.ndarray) -> np.ndarray:
+    """(T,) dB: energy of the upper band over the lower band, minus its median over voiced frames."""
+    balance = 10.0 * np.log10(upper / lower)
     return balance - (np.median(balance[voiced]) if voiced.any() else 0.0)
 
 
-def _mouth(windows: np.ndarray, sample_rate: int, relative: np.ndarray, gate_db: float, fps: float,
+def _mouth(bands: dict, relative: np.ndarray, gate_db: float, fps: float,
            options: LoudnessOptions) -> tuple[np.ndarray, np.ndarray]:
     """(T,) smoothed jaw opening in [0, 1] and (T,) brightness in [-1 round, 1 wide].
 
-    windows: (T, W) windowed audio; relative: (T,) frame levels in dB relative to the speech level.
+    bands: {name: (T,) band energies}; relative: (T,) frame levels in dB relative to the speech level.
     """
     voiced = relative > gate_db
-    power = np.abs(np.fft.rfft(windows, axis=1)) ** 2
-    hz = np.fft.rfftfreq(windows.shape[1], 1.0 / sample_rate)
-    openness = _band_balance(power, hz, OPEN_BAND, MURMUR_BAND, voiced)
-    openness = np.clip(openness, -OPENNESS_LIMIT_DB, OPENNESS_LIMIT_DB)
+    openness = np.clip(_band_balance(bands["open"], bands["murmur"], voiced), -OPENNESS_LIMIT_DB, OPENNESS_LIMIT_DB)
     target = _opening(relative + options.openness * openness, gate_db, options)
     opening = _follow(target, fps, options.attack, options.release)
     opening[opening < CLOSED] = 0.0
-    brightness = np.clip(_band_balance(power, hz, HIGH_BAND, LOW_BAND, voiced) / SHAPE_SPREAD_DB, -1.0, 1.0)
+    brightness = np.clip(_band_balance(bands["high"], bands["low"], voiced) / SHAPE_SPREAD_DB, -1.0, 1.0)
     return opening, _follow(brightness, fps, options.attack, options.attack)
 
 
@@ -164,15 +171,13 @@ def loudness_motion(samples: np.ndarray, sample_rate: int, rest: np.ndarray, fps
     """
     samples = np.nan_to_num(np.asarray(samples, np.float32).reshape(-1), nan=0.0, posinf=0.0, neginf=0.0)
     frames = frame_count(len(samples), sample_rate, fps)
-    windows = _frame_windows(samples, sample_rate, fps, frames, options.lead)
-    mean_square = (windows ** 2).sum(1) / (np.hanning(windows.shape[1]) ** 2).sum()
-    level = 10.0 * np.log10(mean_square + LEVEL_FLOOR)  # (T,) dBFS
+    level, bands = _frame_features(samples, sample_rate, fps, frames, options.lead)
     speech_level = float(np.percentile(level, options.speech_percentile)) if frames else -np.inf
     if speech_level < options.silence_dbfs:
         return Motion.still(frames, fps)
 
     gate = _gate(level, speech_level, options)
-    opening, brightness = _mouth(windows, sample_rate, level - speech_level, gate, fps, options)
+    opening, brightness = _mouth(bands, level - speech_level, gate, fps, options)
     emphasis = _emphasis(opening, fps, options)
     weights = {
         "jaw_open": options.max_jaw * opening,
