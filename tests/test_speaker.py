@@ -1,8 +1,7 @@
 import numpy as np
+from conftest import shared
 
 from puppet import audio, speaker
-
-from conftest import shared
 
 
 def test_embedding_is_a_finite_unit_vector_even_for_silence_and_noise(demo_speech):

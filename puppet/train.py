@@ -1,0 +1,477 @@
+"""Train the audio → landmark network (puppet.network) on a corpus folder and export it to ONNX.
+
+    python -m puppet.train --corpus corpus/ --out runs/landmarks [--steps N]
+
+Reads top to bottom: config, data, model (from scratch or resumed from out/checkpoint.pt),
+optimizers, evaluation, the loop, export. The corpus folder (built by puppet.corpus and the labellers):
+    manifest.jsonl      one {"id", "text", "speaker", "heldout": bool, "seconds", ...} per line
+    audio/ID.wav        16 kHz mono int16
+    targets/ID.npz      offsets (T, 68, 3) float32 IOD units from the canonical face, head frame;
+                        rotation (T, 3) float32 radians (pitch, yaw, roll); fps = 50;
+                        T = features.motion_frame_count(samples)
+    embeddings/ID.npy   (256,) float32 speaker embedding, computed here with puppet.speaker.embed and
+                        cached when missing
+Only ids with targets are used (labelling may still be running); held-out speakers are never
+trained on, only evaluated.
+"""
+import argparse
+import io
+import json
+import math
+import os
+import sys
+import time
+import warnings
+import wave
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from puppet import features
+from puppet.errors import PuppetError
+from puppet.network import (
+    N_LANDMARKS,
+    Discriminator,
+    Network,
+    NetworkConfig,
+    laplacian_loss,
+    lsgan_generator_loss,
+    lsgan_losses,
+    parameter_count,
+    position_loss,
+    soft_limit,
+)
+from puppet.predictor import N_STEP, SILENCE, audio_steps
+
+MODEL_VERSION = "1"  # bump when the exported inputs, outputs or their meaning change
+CHECKPOINT = "checkpoint.pt"
+LOG = "log.jsonl"
+ONNX_FILE = "landmarks.onnx"
+EXPORT_TOLERANCE = 1e-4  # onnxruntime vs torch, absolute, on every output
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    corpus: str = "corpus"  # corpus folder (see the module docstring)
+    out: str = "runs/landmarks"  # checkpoint.pt, log.jsonl and landmarks.onnx go here
+    seed: int = 1337
+    batch_size: int = 16  # training windows per step
+    sequence_frames: int = 128  # motion frames per training window (2.56 s at 50 fps)
+    lr: float = 1e-3  # peak learning rate (Adam)
+    min_lr: float = 1e-5  # the cosine schedule's floor
+    warmup_steps: int = 200  # linear warm-up before the cosine decay
+    steps: int = 30000  # total optimizer steps (a resumed run continues up to this)
+    eval_every: int = 500  # steps between evaluations on the held-out speakers
+    checkpoint_every: int = 1000  # steps between checkpoints
+    log_every: int = 10  # steps between training-loss lines in log.jsonl
+    laplacian_weight: float = 1.0  # λ of Eq. 8 and 12 (paper: 1)
+    rotation_weight: float = 10.0  # head rotation (radians²) against landmark positions (IOD², summed over 68)
+    content_weight: float = 0.5  # the content branch alone must fit the targets too: it carries the mouth
+    gan: bool = True  # train the speaker branch against the LSGAN discriminator of Eq. 10–12
+    gan_weight: float = 0.01  # μ_s of Eq. 12
+    grad_clip: float = 1.0
+    threads: int = 0  # torch intra-op threads; 0 leaves torch's default
+    device: str = "cpu"  # "cuda" to train on a GPU
+    eval_utterances: int = 64  # held-out utterances evaluated at most
+    export: bool = True  # write out/landmarks.onnx at the end, checked against torch
+    network: NetworkConfig = field(default_factory=NetworkConfig)  # ignored when resuming
+
+
+# -- data ------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Utterance:
+    """One labelled utterance, ready for training (T motion frames, L = lookahead).
+    steps (T + L, 160) float32 log-mels, silence after the end; offsets (T, 68, 3); rotation (T, 3);
+    speaker (256,) float32 unit-norm embedding."""
+
+    id: str
+    speaker_id: str
+    steps: np.ndarray
+    offsets: np.ndarray
+    rotation: np.ndarray
+    speaker: np.ndarray
+
+
+def read_wav(path: Path) -> np.ndarray:
+    """(N,) float32 in [-1, 1] from a 16 kHz mono int16 WAV file."""
+    with wave.open(str(path), "rb") as f:
+        if (f.getframerate(), f.getnchannels(), f.getsampwidth()) != (features.SAMPLE_RATE, 1, 2):
+            raise PuppetError(f"{path}: expected 16 kHz mono 16-bit audio")
+        data = f.readframes(f.getnframes())
+    return np.frombuffer(data, dtype="<i2").astype(np.float32) / 32768.0
+
+
+def speaker_embedding(corpus: Path, utterance_id: str, samples: np.ndarray) -> np.ndarray:
+    """(256,) float32 embedding of one utterance's voice, cached as embeddings/ID.npy."""
+    path = corpus / "embeddings" / f"{utterance_id}.npy"
+    if path.exists():
+        return np.load(path).astype(np.float32)
+    from puppet.speaker import (
+        embed,  # written alongside; imported only when an embedding is missing
+    )
+
+    embedding = np.asarray(embed(samples), dtype=np.float32)
+    path.parent.mkdir(exist_ok=True)
+    np.save(path, embedding)
+    return embedding
+
+
+def load_corpus(corpus: Path, lookahead: int) -> tuple[list[Utterance], list[Utterance]]:
+    """(training utterances, held-out utterances) among the manifest's ids that have targets."""
+    manifest = corpus / "manifest.jsonl"
+    if not manifest.exists():
+        raise PuppetError(f"no corpus at {corpus}: {manifest} is missing")
+    train, heldout = [], []
+    for line in manifest.read_text().splitlines():
+        if not line.strip():
+            continue
+        entry = json.loads(line)
+        target_path = corpus / "targets" / f"{entry['id']}.npz"
+        if not target_path.exists():
+            continue  # not labelled yet
+        samples = read_wav(corpus / "audio" / f"{entry['id']}.wav")
+        target = np.load(target_path)
+        frames = features.motion_frame_count(len(samples))
+        if target["offsets"].shape != (frames, N_LANDMARKS, 3) or target["rotation"].shape != (frames, 3):
+            raise PuppetError(f"{target_path}: expected {frames} frames of offsets (T, 68, 3) and rotation (T, 3)")
+        utterance = Utterance(
+            entry["id"], str(entry["speaker"]), audio_steps(samples, lookahead),
+            target["offsets"].astype(np.float32), target["rotation"].astype(np.float32),
+            speaker_embedding(corpus, entry["id"], samples),
+        )
+        (heldout if entry.get("heldout") else train).append(utterance)
+    if not train:
+        raise PuppetError(f"{corpus} has no labelled training utterances yet (targets/ID.npz)")
+    return train, heldout
+
+
+def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: int, rng: np.random.Generator) -> dict:
+    """A batch of random windows, utterances drawn in proportion to their length:
+    steps (B, S + L, 160), speaker (B, 256), offsets (B, S, 68, 3), rotation (B, S, 3), mask (B, S),
+    where network output step L + i is target frame i (S = sequence_frames, L = lookahead)."""
+    frames = config.sequence_frames
+    lengths = np.array([len(u.offsets) for u in utterances], np.float64)
+    batch = {
+        "steps": np.full((config.batch_size, frames + lookahead, N_STEP), SILENCE, np.float32),
+        "speaker": np.zeros((config.batch_size, 256), np.float32),
+        "offsets": np.zeros((config.batch_size, frames, N_LANDMARKS, 3), np.float32),
+        "rotation": np.zeros((config.batch_size, frames, 3), np.float32),
+        "mask": np.zeros((config.batch_size, frames), np.float32),
+    }
+    for b, index in enumerate(rng.choice(len(utterances), config.batch_size, p=lengths / lengths.sum())):
+        u = utterances[index]
+        start = int(rng.integers(0, max(1, len(u.offsets) - frames + 1)))
+        n = min(frames, len(u.offsets) - start)
+        batch["steps"][b, : n + lookahead] = u.steps[start : start + n + lookahead]
+        batch["speaker"][b] = u.speaker
+        batch["offsets"][b, :n] = u.offsets[start : start + n]
+        batch["rotation"][b, :n] = u.rotation[start : start + n]
+        batch["mask"][b, :n] = 1.0
+    return {k: torch.from_numpy(v).to(config.device) for k, v in batch.items()}
+
+
+def feature_stats(utterances: list[Utterance], lookahead: int) -> tuple[np.ndarray, np.ndarray]:
+    """(160,) mean and std of the training log-mels (the silence padding left out)."""
+    steps = np.concatenate([u.steps[: len(u.steps) - lookahead] for u in utterances])
+    return steps.mean(0), steps.std(0)
+
+
+# -- losses ----------------------------------------------------------------------------------------
+
+
+def generator_losses(model: Network, batch: dict, config: TrainConfig, discriminator: Discriminator | None = None):
+    """(total loss, the network's output trimmed to the target frames, a dict of float terms for the log)."""
+    lookahead, mask = model.config.lookahead, batch["mask"]
+    out = model.run(batch["steps"], batch["speaker"], model.initial_state(len(mask)))
+    offsets, rotation = out.offsets[:, lookahead:], out.rotation[:, lookahead:]
+    content = out.content[:, lookahead:].unflatten(-1, (N_LANDMARKS, 3))
+    terms = {
+        "position": position_loss(offsets, batch["offsets"], mask),
+        "laplacian": laplacian_loss(offsets, batch["offsets"], mask),
+        "rotation": ((rotation - batch["rotation"]).square().sum(-1) * mask).sum() / mask.sum().clamp(min=1.0),
+        "content_position": position_loss(content, batch["offsets"], mask),
+        "content_laplacian": laplacian_loss(content, batch["offsets"], mask),
+    }
+    total = (
+        terms["position"] + config.laplacian_weight * terms["laplacian"] + config.rotation_weight * terms["rotation"]
+        + config.content_weight * (terms["content_position"] + config.laplacian_weight * terms["content_laplacian"])
+    )
+    fake = None
+    if discriminator is not None:
+        # The adversarial gradient reaches only the speaker branch (rotation and expression), as in §4.2.
+        fake = speaker_branch_offsets(model, out, lookahead)
+        terms["adversarial"] = lsgan_generator_loss(discriminator(fake, rotation, *discriminator_context(out, lookahead)), mask)
+        total = total + config.gan_weight * terms["adversarial"]
+    terms["total"] = total
+    return total, (out, fake), {k: float(v.detach()) for k, v in terms.items()}
+
+
+def speaker_branch_offsets(model: Network, out, lookahead: int) -> torch.Tensor:
+    """(B, S, 68, 3) output offsets with the content branch's share held fixed."""
+    offsets = soft_limit(out.content.detach() + out.expression, model.config.offset_limit)[:, lookahead:]
+    return offsets.unflatten(-1, (N_LANDMARKS, 3))
+
+
+def discriminator_context(out, lookahead: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """What the discriminator judges the motion against: c̃ (B, S, C) and the reduced speaker (B, 128)."""
+    return out.code[:, lookahead:].detach(), out.speaker.detach()
+
+
+@torch.no_grad()
+def evaluate(model: Network, utterances: list[Utterance], config: TrainConfig) -> dict:
+    """Mean losses over whole held-out utterances, each run from the start as at inference."""
+    model.eval()
+    sums: dict[str, float] = {}
+    for u in utterances[: config.eval_utterances]:
+        frames = len(u.offsets)
+        batch = {
+            "steps": u.steps[None], "speaker": u.speaker[None], "offsets": u.offsets[None],
+            "rotation": u.rotation[None], "mask": np.ones((1, frames), np.float32),
+        }
+        batch = {k: torch.from_numpy(v).to(config.device) for k, v in batch.items()}
+        _, _, terms = generator_losses(model, batch, config)
+        for k, v in terms.items():
+            sums[k] = sums.get(k, 0.0) + v
+    model.train()
+    count = min(len(utterances), config.eval_utterances)
+    return {k: v / count for k, v in sums.items()}
+
+
+# -- checkpoints and export ------------------------------------------------------------------------
+
+
+def network_config(args: dict) -> NetworkConfig:
+    """The NetworkConfig stored in a checkpoint as a dict."""
+    return NetworkConfig(**{**args, "content_mlp": tuple(args["content_mlp"])})
+
+
+def load_network(checkpoint: Path) -> tuple[Network, dict]:
+    """The network of a checkpoint (in eval mode) and the checkpoint itself; nothing else needed."""
+    state = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    model = Network(network_config(state["model_args"]))
+    model.load_state_dict(state["model"])
+    return model.eval(), state
+
+
+def _protobuf_field(number: int, payload: bytes) -> bytes:
+    """A length-delimited protobuf field: tag, length, payload (varints)."""
+
+    def varint(n: int) -> bytes:
+        out = bytearray()
+        while True:
+            out.append((n & 0x7F) | (0x80 if n > 0x7F else 0))
+            n >>= 7
+            if not n:
+                return bytes(out)
+
+    return varint(number << 3 | 2) + varint(len(payload)) + payload
+
+
+def with_metadata(model: bytes, metadata: dict[str, str]) -> bytes:
+    """An ONNX ModelProto with metadata_props (field 14) entries appended: repeated protobuf fields may
+    follow the rest of a message, so this needs no `onnx` package."""
+    entries = (_protobuf_field(1, k.encode()) + _protobuf_field(2, v.encode()) for k, v in metadata.items())
+    return model + b"".join(_protobuf_field(14, entry) for entry in entries)
+
+
+def export(checkpoint: str | Path, path: str | Path) -> Path:
+    """Write the checkpoint's network as ONNX (time axis dynamic, batch 1) with its metadata, then check
+    onnxruntime's outputs against torch's (EXPORT_TOLERANCE). Inputs: steps (1, T, 160), speaker (1, 256),
+    h, c, past, valid (the State); outputs: offsets (1, T, 68, 3), rotation (1, T, 3), h_out, c_out,
+    past_out, valid_out."""
+    import onnxruntime as ort
+
+    model, state = load_network(Path(checkpoint))
+    generator = torch.Generator().manual_seed(0)
+    speaker = torch.nn.functional.normalize(torch.randn(1, 256, generator=generator), dim=-1)
+    warm = torch.randn(1, 23, N_STEP, generator=generator) * 1.5 - 2.5
+    steps = torch.randn(1, 37, N_STEP, generator=generator) * 1.5 - 2.5
+    with torch.no_grad():
+        start = model.run(warm, speaker, model.initial_state()).state  # a lived-in state, not only zeros
+        expected = model(steps, speaker, *start)
+    names = ["h", "c", "past", "valid"]
+    buffer = io.BytesIO()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(
+            model, (steps, speaker, *start), buffer, dynamo=False, opset_version=17,
+            input_names=["steps", "speaker", *names], output_names=["offsets", "rotation", *(n + "_out" for n in names)],
+            dynamic_axes={"steps": {1: "time"}, "offsets": {1: "time"}, "rotation": {1: "time"}},
+        )
+    metadata = {
+        "feature_spec": json.dumps(features.SPEC),
+        "motion_fps": str(features.MOTION_FPS),
+        "n_landmarks": str(N_LANDMARKS),
+        "lookahead_frames": str(model.config.lookahead),
+        "window_frames": str(model.config.window),
+        "version": MODEL_VERSION,
+        "network": json.dumps(state["model_args"]),
+        "training": json.dumps(state.get("training", {})),
+        "outputs": "offsets (1,T,68,3) float32 inter-ocular distances from the canonical face, head frame; "
+        "rotation (1,T,3) float32 radians (pitch, yaw, roll); output step i is motion frame i - lookahead_frames",
+    }
+    onnx_bytes = with_metadata(buffer.getvalue(), metadata)
+    session = ort.InferenceSession(onnx_bytes, providers=["CPUExecutionProvider"])
+    feeds = {"steps": steps.numpy(), "speaker": speaker.numpy(), **{n: s.numpy() for n, s in zip(names, start)}}
+    for name, got, want in zip(["offsets", "rotation", *names], session.run(None, feeds), expected):
+        error = float(np.abs(got - want.numpy()).max())
+        if error > EXPORT_TOLERANCE:
+            raise RuntimeError(f"ONNX export differs from torch on {name}: max |error| {error:.2e} > {EXPORT_TOLERANCE}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(onnx_bytes)
+    return path
+
+
+def save_checkpoint(path: Path, state: dict) -> None:
+    """Write atomically, so a run killed mid-save keeps its previous checkpoint."""
+    temporary = path.with_suffix(".tmp")
+    torch.save(state, temporary)
+    os.replace(temporary, path)
+
+
+def learning_rate(step: int, config: TrainConfig) -> float:
+    """Linear warm-up to lr, then cosine decay to min_lr at the last step."""
+    if step < config.warmup_steps:
+        return config.lr * (step + 1) / config.warmup_steps
+    progress = min(1.0, (step - config.warmup_steps) / max(1, config.steps - config.warmup_steps))
+    return config.min_lr + 0.5 * (config.lr - config.min_lr) * (1 + math.cos(math.pi * progress))
+
+
+# -- the run ---------------------------------------------------------------------------------------
+
+
+def train(config: TrainConfig) -> Path:
+    """Train (or resume) to config.steps; returns the checkpoint path (the ONNX model lies beside it)."""
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    checkpoint_path = out / CHECKPOINT
+    if config.threads > 0:
+        torch.set_num_threads(config.threads)
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng(config.seed)
+
+    # Model: from scratch, or exactly where the last checkpoint left it.
+    resumed = torch.load(checkpoint_path, map_location="cpu", weights_only=True) if checkpoint_path.exists() else None
+    network = network_config(resumed["model_args"]) if resumed else config.network
+    lookahead = network.lookahead
+    utterances, heldout = load_corpus(Path(config.corpus), lookahead)
+    model = Network(network).to(config.device)
+    discriminator = Discriminator(network).to(config.device) if config.gan else None
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
+    d_optimizer = torch.optim.Adam(discriminator.parameters(), lr=config.lr, betas=(0.5, 0.999)) if config.gan else None
+    step = 0
+    if resumed:
+        model.load_state_dict(resumed["model"])
+        optimizer.load_state_dict(resumed["optimizer"])
+        if config.gan and "discriminator" in resumed:
+            discriminator.load_state_dict(resumed["discriminator"])
+            d_optimizer.load_state_dict(resumed["d_optimizer"])
+        step = resumed["step"]
+        torch.set_rng_state(resumed["rng"]["torch"])
+        rng.bit_generator.state = json.loads(resumed["rng"]["numpy"])
+    else:
+        model.set_feature_stats(*feature_stats(utterances, lookahead))
+    speakers = sorted({u.speaker_id for u in utterances})
+    print(f"{len(utterances)} training utterances from {len(speakers)} speakers, {len(heldout)} held out; "
+          f"{parameter_count(model):,} parameters; {'resuming at' if resumed else 'starting from'} step {step}")
+
+    def checkpoint(validation: dict | None) -> None:
+        training = {
+            "steps": step, "seed": config.seed, "corpus": str(config.corpus), "utterances": len(utterances),
+            "speakers": len(speakers), "heldout_utterances": len(heldout), "validation": validation,
+        }
+        state = {
+            "model_args": asdict(network), "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+            "step": step, "config": json.dumps(asdict(config)), "training": training,
+            "rng": {"torch": torch.get_rng_state(), "numpy": json.dumps(rng.bit_generator.state)},
+        }
+        if config.gan:
+            state["discriminator"], state["d_optimizer"] = discriminator.state_dict(), d_optimizer.state_dict()
+        save_checkpoint(checkpoint_path, state)
+
+    # The loop.
+    model.train()
+    validation = None
+    with open(out / LOG, "a") as log:
+        started = time.time()
+        while step < config.steps:
+            lr = learning_rate(step, config)
+            for group in optimizer.param_groups + (d_optimizer.param_groups if config.gan else []):
+                group["lr"] = lr
+            batch = sample_batch(utterances, config, lookahead, rng)
+            loss, (out_, fake), terms = generator_losses(model, batch, config, discriminator)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
+            optimizer.step()
+            if config.gan:
+                # Eq. 11: the discriminator learns real (training) motion from generated motion.
+                context = discriminator_context(out_, lookahead)
+                real = discriminator(batch["offsets"], batch["rotation"], *context)
+                generated = discriminator(fake.detach(), out_.rotation[:, lookahead:].detach(), *context)
+                d_loss = lsgan_losses(real, generated, batch["mask"])
+                d_optimizer.zero_grad(set_to_none=True)
+                d_loss.backward()
+                torch.nn.utils.clip_grad_norm_(discriminator.parameters(), config.grad_clip)
+                d_optimizer.step()
+                terms["discriminator"] = float(d_loss.detach())
+            step += 1
+            if step % config.log_every == 0 or step == config.steps:
+                log.write(json.dumps({"step": step, "lr": lr, "train": terms, "seconds": round(time.time() - started, 1)}) + "\n")
+                log.flush()
+            if heldout and (step % config.eval_every == 0 or step == config.steps):
+                validation = evaluate(model, heldout, config)
+                log.write(json.dumps({"step": step, "validation": validation}) + "\n")
+                log.flush()
+                print(f"step {step}: train {terms['total']:.4f}, held-out {validation['total']:.4f}")
+            if step % config.checkpoint_every == 0 or step == config.steps:
+                checkpoint(validation)
+    if not checkpoint_path.exists():
+        checkpoint(validation)  # resumed at or beyond config.steps
+    if config.export:
+        print(f"exported {export(checkpoint_path, out / ONNX_FILE)}")
+    return checkpoint_path
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="puppet train", description="Train the audio → landmark network on a corpus folder.")
+    defaults = TrainConfig()
+    parser.add_argument("--corpus", required=True, help="corpus folder (manifest.jsonl, audio/, targets/)")
+    parser.add_argument("--out", required=True, help="output folder: checkpoint.pt (resumed if present), log.jsonl, landmarks.onnx")
+    parser.add_argument("--steps", type=int, default=defaults.steps, help=f"total training steps (default {defaults.steps})")
+    parser.add_argument("--batch-size", type=int, default=defaults.batch_size)
+    parser.add_argument("--sequence-frames", type=int, default=defaults.sequence_frames)
+    parser.add_argument("--lr", type=float, default=defaults.lr)
+    parser.add_argument("--seed", type=int, default=defaults.seed)
+    parser.add_argument("--eval-every", type=int, default=defaults.eval_every)
+    parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every)
+    parser.add_argument("--no-gan", action="store_true", help="train without the adversarial loss")
+    parser.add_argument("--threads", type=int, default=defaults.threads)
+    parser.add_argument("--device", default=defaults.device, help="torch device, e.g. cuda (default cpu)")
+    return parser
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    return TrainConfig(
+        corpus=args.corpus, out=args.out, steps=args.steps, batch_size=args.batch_size,
+        sequence_frames=args.sequence_frames, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
+        checkpoint_every=args.checkpoint_every, gan=not args.no_gan, threads=args.threads, device=args.device,
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        train(config_from_args(build_parser().parse_args(argv)))
+    except PuppetError as error:
+        print(f"puppet train: {error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,141 @@
+import json
+import shutil
+import wave
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from puppet import features
+from puppet.network import LOOKAHEAD, NetworkConfig
+from puppet.train import (
+    CHECKPOINT,
+    LOG,
+    ONNX_FILE,
+    TrainConfig,
+    export,
+    load_network,
+    train,
+)
+
+VOICES = {"low": 120.0, "high": 210.0, "other": 160.0}  # speaker → fundamental (Hz); "other" is held out
+LOWER_LIP_AND_CHIN = [7, 8, 9, 56, 57, 58, 65, 66, 67]
+# The paper's layout at a fraction of the width, so that a few CPU steps show learning quickly.
+TINY = NetworkConfig(content_hidden=64, content_mlp=(128, 64), content_code=16, speaker_reduced=32, window=64, speaker_mlp=64)
+
+
+def synthetic_utterance(rng, f0, seconds):
+    """Harmonic bursts between silences, and targets whose mouth opens with the burst envelope."""
+    n = int(seconds * features.SAMPLE_RATE)
+    envelope = np.zeros(n, np.float32)
+    position = int(rng.uniform(0.1, 0.3) * features.SAMPLE_RATE)
+    while position < n - 4000:
+        length = int(rng.uniform(0.12, 0.35) * features.SAMPLE_RATE)
+        envelope[position : position + length] = np.hanning(length)[: n - position] * rng.uniform(0.5, 1.0)
+        position += length + int(rng.uniform(0.08, 0.3) * features.SAMPLE_RATE)
+    t = np.arange(n) / features.SAMPLE_RATE
+    voice = sum(np.sin(2 * np.pi * f0 * k * t) / k for k in range(1, 12))
+    samples = (0.25 * envelope * voice).astype(np.float32)
+    frames = features.motion_frame_count(n)
+    centres = np.minimum(np.arange(frames) * 320 + 80, n - 1)
+    offsets = np.zeros((frames, 68, 3), np.float32)
+    offsets[:, LOWER_LIP_AND_CHIN, 1] = 0.3 * envelope[centres, None]
+    rotation = np.zeros((frames, 3), np.float32)
+    rotation[:, 0] = 0.05 * np.sin(np.arange(frames) / 25 + f0)
+    return samples, offsets, rotation
+
+
+def make_corpus(folder, seed=0, per_voice=3):
+    """A corpus folder as puppet.corpus and the labellers write it (plus cached speaker embeddings)."""
+    rng = np.random.default_rng(seed)
+    for sub in ("audio", "targets", "embeddings"):
+        (folder / sub).mkdir(parents=True, exist_ok=True)
+    lines = []
+    for speaker, f0 in VOICES.items():
+        embedding = rng.standard_normal(256).astype(np.float32)
+        embedding /= np.linalg.norm(embedding)
+        for i in range(1 if speaker == "other" else per_voice):
+            uid = f"{speaker}{i:02d}"
+            samples, offsets, rotation = synthetic_utterance(rng, f0, rng.uniform(1.5, 2.5))
+            with wave.open(str(folder / "audio" / f"{uid}.wav"), "wb") as f:
+                f.setnchannels(1), f.setsampwidth(2), f.setframerate(features.SAMPLE_RATE)
+                f.writeframes((samples * 32767).astype("<i2").tobytes())
+            np.savez(folder / "targets" / f"{uid}.npz", offsets=offsets, rotation=rotation, fps=50)
+            np.save(folder / "embeddings" / f"{uid}.npy", embedding)
+            heldout = speaker == "other"
+            lines.append(json.dumps({"id": uid, "text": "bursts", "speaker": speaker, "heldout": heldout, "seconds": len(samples) / 16000}))
+    lines.append(json.dumps({"id": "unlabelled", "text": "x", "speaker": "low", "heldout": False, "seconds": 1.0}))
+    (folder / "manifest.jsonl").write_text("\n".join(lines) + "\n")
+    return folder
+
+
+def log_lines(out):
+    return [json.loads(line) for line in (out / LOG).read_text().splitlines()]
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("train")
+    config = TrainConfig(
+        corpus=str(make_corpus(root / "corpus")), out=str(root / "out"), batch_size=8, sequence_frames=64,
+        lr=3e-3, warmup_steps=5, steps=30, eval_every=15, checkpoint_every=10, log_every=1, gan=False, export=False,
+        network=TINY, threads=1,
+    )
+    train(config)
+    return config
+
+
+def test_loss_falls(run):
+    lines = [line for line in log_lines(Path(run.out)) if "train" in line]
+    first = np.mean([line["train"]["position"] for line in lines[:3]])
+    last = np.mean([line["train"]["position"] for line in lines[-3:]])
+    assert [line["step"] for line in lines] == list(range(1, 31))
+    assert last < 0.5 * first
+    validation = [line for line in log_lines(Path(run.out)) if "validation" in line]
+    assert [line["step"] for line in validation] == [15, 30]
+
+
+def test_resume_continues(run, tmp_path):
+    out = tmp_path / "out"
+    shutil.copytree(run.out, out)
+    train(replace(run, out=str(out), steps=34))
+    steps = [line["step"] for line in log_lines(out) if "train" in line]
+    assert steps == list(range(1, 35))
+    _, checkpoint = load_network(out / CHECKPOINT)
+    assert checkpoint["step"] == 34
+    assert Path(run.out, CHECKPOINT).exists()
+
+
+def test_gan_step(tmp_path):
+    corpus = make_corpus(tmp_path / "corpus", per_voice=1)
+    config = TrainConfig(corpus=str(corpus), out=str(tmp_path / "out"), batch_size=2, sequence_frames=32, steps=2, log_every=1, gan=True, export=False, network=TINY, threads=1)
+    train(config)
+    lines = [line for line in log_lines(tmp_path / "out") if "train" in line]
+    assert all(np.isfinite(line["train"]["discriminator"]) and np.isfinite(line["train"]["adversarial"]) for line in lines)
+
+
+def test_export_matches_torch(run, tmp_path):
+    import onnxruntime as ort
+
+    from puppet.predictor import Predictor, audio_steps
+    from puppet.train import read_wav
+
+    path = export(Path(run.out, CHECKPOINT), tmp_path / ONNX_FILE)
+    model, _ = load_network(Path(run.out, CHECKPOINT))
+    samples = read_wav(Path(run.corpus, "audio", "low00.wav"))
+    steps = audio_steps(samples, model.config.lookahead)
+    speaker = np.load(Path(run.corpus, "embeddings", "low00.npy"))
+    with torch.no_grad():
+        want = model.run(torch.from_numpy(steps[None]), torch.from_numpy(speaker[None]), model.initial_state())
+    predictor = Predictor(path)
+    offsets, rotation = predictor.predict(samples, speaker)
+    lookahead = model.config.lookahead
+    np.testing.assert_allclose(offsets, want.offsets[0, lookahead:].numpy(), atol=1e-4, rtol=0)
+    np.testing.assert_allclose(rotation, want.rotation[0, lookahead:].numpy(), atol=1e-4, rtol=0)
+    meta = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta().custom_metadata_map
+    assert json.loads(meta["feature_spec"]) == json.loads(json.dumps(features.SPEC))
+    assert meta["n_landmarks"] == "68" and meta["lookahead_frames"] == str(LOOKAHEAD) and float(meta["motion_fps"]) == 50
+    assert json.loads(meta["training"])["steps"] == 30
