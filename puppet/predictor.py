@@ -8,8 +8,8 @@ in chunks of any size, gives the same motion as `Predictor.predict` on the whole
 Timing of a stream. Motion frame t covers log-mel frames 2t and 2t + 1; the network emits it at
 step t + lookahead, once log-mel frame 2(t + lookahead) + 1 is complete, i.e. once
 320·t + 320·lookahead + 360 samples have arrived (the Hann window reaches 200 samples past a frame's
-centre). With lookahead 4 that is 102.5 ms of audio past the start of frame t, 80 ms of which is the
-network's own lookahead. At the end of the audio, `finish` pads silence to release the last frames.
+centre). With lookahead 3 (the default) that is 82.5 ms of audio past the start of frame t, 72.5 ms
+past its centre, 60 ms of which is the network's own lookahead. At the end of the audio, `finish` pads silence to release the last frames.
 """
 import json
 from importlib.resources import files
