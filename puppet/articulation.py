@@ -25,6 +25,15 @@ What each unit does at weight 1 (IOD = this face's inter-ocular distance in pixe
                 point BLINK_LOWER_RISE = 20% of the way up from the lower lid.
     brow_raise  the brows rise by up to 0.12 IOD (least at the outer ends).
     brow_frown  the brows lower by up to 0.09 IOD and their inner ends draw 0.05 IOD together.
+    upper_lip_raise
+                the middle of the upper lip lifts 0.06 IOD (outer edge) and 0.05 IOD (inner edge) and
+                flares 0.02 IOD toward the viewer, baring the upper teeth ("sh", "f").
+    lower_lip_tuck
+                the lower lip rolls up and back under the upper teeth: its inner edge rises 0.08 IOD
+                and goes 0.08 IOD back, its outer edge rises 0.10 IOD and goes 0.06 IOD back ("f", "v").
+
+`close_lips` is not a unit: it brings the inner lips of any mouth shape together, so that a
+closure (p, b, m) still closes when other units have opened the jaw.
 """
 import numpy as np
 
@@ -67,11 +76,15 @@ PRESS_TUCK = 0.3  # share of each lip's rest thickness lost when the lips are pr
 OUTER_OVER_INNER = ((49, 61), (50, 61), (51, 62), (52, 63), (53, 63),
                     (59, 67), (58, 67), (57, 66), (56, 65), (55, 65))
 
+# close_lips: the lips meet this far down from the upper inner lip (the lower lip, carried by the
+# jaw, travels most of the way).
+LIP_MEET = 0.3
+
 # blinks.
 BLINK_LOWER_RISE = 0.2  # the lids meet this far up from the lower lid (share of the rest opening)
 
 UNITS = ("jaw_open", "lip_wide", "lip_round", "lip_press", "smile",
-         "blink_right", "blink_left", "brow_raise", "brow_frown")
+         "blink_right", "blink_left", "brow_raise", "brow_frown", "upper_lip_raise", "lower_lip_tuck")
 
 
 def _symmetric(moves: dict[int, tuple[float, float, float]]) -> np.ndarray:
@@ -129,6 +142,21 @@ def _smile() -> np.ndarray:
     })
 
 
+def _upper_lip_raise() -> np.ndarray:
+    return _symmetric({
+        48: (0.0, -0.01, 0.0), 49: (0.0, -0.04, 0.01), 50: (0.0, -0.06, 0.02), 51: (0.0, -0.06, 0.02),
+        60: (0.0, -0.01, 0.0), 61: (0.0, -0.045, 0.01), 62: (0.0, -0.05, 0.01),
+    })
+
+
+def _lower_lip_tuck() -> np.ndarray:
+    return _symmetric({
+        48: (0.0, -0.01, 0.0), 60: (0.0, -0.01, 0.0),
+        59: (0.0, -0.07, -0.04), 58: (0.0, -0.10, -0.06), 57: (0.0, -0.10, -0.06),
+        67: (0.0, -0.07, -0.07), 66: (0.0, -0.08, -0.08),
+    })
+
+
 def _brow_raise() -> np.ndarray:
     return _symmetric({17: (0.0, -0.08, 0.0), 18: (0.0, -0.11, 0.0), 19: (0.0, -0.12, 0.0),
                        20: (0.0, -0.12, 0.0), 21: (0.0, -0.10, 0.0)})
@@ -179,7 +207,8 @@ def unit_offsets(rest: np.ndarray) -> dict[str, np.ndarray]:
     """
     rest = np.asarray(rest, dtype=np.float32)
     tables = {"jaw_open": _jaw_open(), "lip_wide": _lip_wide(), "lip_round": _lip_round(),
-              "smile": _smile(), "brow_raise": _brow_raise(), "brow_frown": _brow_frown()}
+              "smile": _smile(), "brow_raise": _brow_raise(), "brow_frown": _brow_frown(),
+              "upper_lip_raise": _upper_lip_raise(), "lower_lip_tuck": _lower_lip_tuck()}
     units = {name: _to_pixels(table, rest) for name, table in tables.items()}
     units["lip_press"] = _lip_press(rest)
     units["blink_right"] = _blink(rest, EYELID_PAIRS[:2])
@@ -203,3 +232,24 @@ def blend(units: dict[str, np.ndarray], weights: dict[str, np.ndarray]) -> np.nd
     matrix = np.stack([np.asarray(weights[name], np.float32) for name in names], axis=1)  # (T, U)
     basis = np.stack([units[name] for name in names])  # (U, 68, 3)
     return np.einsum("tu,unc->tnc", matrix, basis).astype(np.float32)
+
+
+def close_lips(points: np.ndarray, amount: np.ndarray) -> np.ndarray:
+    """(T, 68, 3) float32 offsets that bring the inner lips of each frame's mouth together.
+
+    points: (T, 68, 3) float32 landmarks in any frame and unit (pixels, or IOD face units), the
+            mouth shapes to close (e.g. rest + blended unit offsets).
+    amount: (T,) float32 in [0, 1]: 0 leaves a frame alone, 1 makes each facing inner-lip pair meet
+            LIP_MEET of the way from the upper to the lower lip; the outer lip points move with the
+            inner point they sit over, so the lips keep their thickness.
+    """
+    points = np.asarray(points, np.float32)
+    amount = np.asarray(amount, np.float32)[:, None]
+    offsets = np.zeros_like(points)
+    for upper, lower in INNER_LIP_PAIRS:
+        opening = points[:, lower] - points[:, upper]
+        offsets[:, upper] = amount * LIP_MEET * opening
+        offsets[:, lower] = -amount * (1.0 - LIP_MEET) * opening
+    for outer, inner in OUTER_OVER_INNER:
+        offsets[:, outer] = offsets[:, inner]
+    return offsets

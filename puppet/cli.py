@@ -65,7 +65,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("-o", "--output", type=Path, required=True, help="output .mp4/.mov/.mkv, or a folder name (no suffix) for RGBA PNG frames")
     render.add_argument("--demo", action="store_true", help="use the bundled character and speech clip")
     _add_rigging_arguments(render)
-    render.add_argument("--motion", default="loudness", help="motion source: 'loudness' (built-in, default) or a track .npz (from --landmarks-out)")
+    render.add_argument("--motion", help="motion source: 'learned' (the lip-sync network; the default when installed), 'loudness' (a volume-driven baseline) or a track .npz (from --landmarks-out or puppet predict)")
     render.add_argument("--size", type=parse_size, help="output WIDTHxHEIGHT, or one number for the longer side (default: the portrait's size, at most 1080)")
     render.add_argument("--fps", type=float, default=25.0, help="frames per second (default 25)")
     render.add_argument("--background", type=parse_background, help="'transparent', white, black, green, blue, magenta, grey or #rrggbb (default: transparent for frames, white for video)")
@@ -87,6 +87,45 @@ def build_parser() -> argparse.ArgumentParser:
     rig.add_argument("-o", "--output", type=Path, help="bundle folder to write (default: IMAGE's name + .puppet beside it)")
     _add_rigging_arguments(rig)
     rig.add_argument("-f", "--force", action="store_true", help="overwrite an existing bundle")
+
+    predict = commands.add_parser(
+        "predict",
+        help="speech → a motion track (.npz) of a face's 68 landmarks, from the lip-sync network",
+        description="Predict the motion of a face's 68 landmarks from speech with the trained network: "
+        "the face's own landmarks put in motion (lips, expression, head, blinks). Render it with "
+        "`puppet render IMAGE AUDIO --motion TRACK.npz`.",
+    )
+    predict.add_argument("audio", type=Path, help="speech: any format FFmpeg reads")
+    predict.add_argument("--face", type=Path, help="the face's 68 landmarks (text, .json or .npy; pixels); default: puppet's canonical face in a 512×512 frame")
+    predict.add_argument("-o", "--output", type=Path, required=True, help="track file to write (.npz: landmarks (T,68,3) float32, fps)")
+    predict.add_argument("--fps", type=float, default=25.0, help="frames per second of the track (default 25)")
+    predict.add_argument("--seed", type=int, default=0, help="seed for blinks and idle motion (default 0)")
+    predict.add_argument("-f", "--force", action="store_true", help="overwrite an existing track")
+
+    train = commands.add_parser(
+        "train",
+        help="rebuild the lip-sync network: make the TTS corpus, label it, train, export ONNX (needs the train extra)",
+        description="Rebuild the shipped lip-sync model from scratch: synthesise and augment a speech corpus with local "
+        "TTS voices, align it with pocketsphinx and compute articulation targets, train the network, export ONNX. "
+        "Every stage resumes where it stopped.",
+    )
+    train.add_argument("--corpus", type=Path, default=Path.home() / ".cache" / "puppet" / "corpus", help="corpus folder (default ~/.cache/puppet/corpus)")
+    train.add_argument("--hours", type=float, default=3.5, help="hours of speech in the corpus (default 3.5)")
+    train.add_argument("--out", type=Path, default=Path("runs") / "landmarks", help="checkpoints, logs and the ONNX model (default runs/landmarks)")
+    train.add_argument("--steps", type=int, help="training steps (default: the training config's)")
+    train.add_argument("--seed", type=int, default=0, help="corpus seed (default 0)")
+    train.add_argument("--install", action="store_true", help="copy the exported model into this install's assets/models")
+
+    evaluate = commands.add_parser(
+        "eval",
+        help="score lip sync (MakeItTalk's D-LL, D-VL, D-A, D-L, D-V, D-Rot) against baselines",
+        description="Score the lip-sync network beside the loudness baseline and a static face, on held-out synthetic "
+        "voices of a corpus and on real talking videos (landmarks tracked with puppet's own detector).",
+    )
+    evaluate.add_argument("--corpus", type=Path, help="corpus folder: its held-out speakers are scored")
+    evaluate.add_argument("--videos", type=Path, help="folder of talking-face videos with speech (.mp4, .mov, .mkv)")
+    evaluate.add_argument("--json", type=Path, help="also write the scores here")
+    evaluate.add_argument("--limit", type=int, default=200, help="held-out utterances scored at most (default 200)")
 
     bench = commands.add_parser("bench", help="measure rendering and export speed on this machine")
     bench.add_argument("--json", action="store_true", help="print the figures as one JSON object")
@@ -116,12 +155,18 @@ def run(args: argparse.Namespace) -> int:
         print(f"rigged {args.image} -> {folder}  (check {folder / bundle.PREVIEW_FILE}; render with: puppet render {folder} SPEECH.wav -o out.mp4)")
         return 0
 
+    if args.command == "predict":
+        return _predict(args)
+    if args.command == "train":
+        return _train(args)
+    if args.command == "eval":
+        return _evaluate(args)
     if args.command == "bench":
         from puppet.bench import main as bench_main
 
         return bench_main(args.json, args.seconds, args.clip)
 
-    from puppet import video
+    from puppet import lipsync, video
 
     if args.demo:
         if args.input is not None:
@@ -134,9 +179,10 @@ def run(args: argparse.Namespace) -> int:
             raise PuppetError("give a portrait (image or bundle) and an audio file, or --demo")
         puppet = bundle.load(args.input, args.landmarks, points)
         audio_path = args.audio
-        if audio_path is None and args.motion in video.MOTION_SOURCES:
+        if audio_path is None and args.motion in (None,) + video.MOTION_SOURCES:
             raise PuppetError("give an audio file after the portrait (or --motion TRACK.npz)")
-    options = video.VideoOptions(fps=args.fps, background=args.background, samples=args.msaa, motion=args.motion)
+    motion = args.motion or ("learned" if lipsync.has_model() else "loudness")
+    options = video.VideoOptions(fps=args.fps, background=args.background, samples=args.msaa, motion=motion)
     if args.size is not None:
         size = args.size if isinstance(args.size, tuple) else video.output_size(puppet.rig.image_size, args.size)
         options = replace(options, size=size)
@@ -161,3 +207,73 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"puppet: internal error: {type(error).__name__}: {error} (set PUPPET_DEBUG=1 for details)", file=sys.stderr)
         return 1
+
+
+def _predict(args: argparse.Namespace) -> int:
+    from puppet import audio, lipsync, track
+    from puppet.landmarks import load, with_depth
+    from puppet.life import LifeOptions, life_motion
+    from puppet.loudness import frame_count
+    from puppet.pose import posed_landmarks
+    from puppet.video import check_track_output
+
+    output = check_track_output(args.output, args.force)
+    rest = with_depth(load(args.face) if args.face else canonical_face_pixels())
+    samples = audio.load(args.audio)
+    audio.check_audible(samples, str(args.audio))
+    frames = frame_count(len(samples), audio.ANALYSIS_RATE, args.fps)
+    motion = lipsync.learned_motion(samples, rest, args.fps, frames)
+    motion = motion + life_motion(frames, args.fps, rest, LifeOptions(seed=args.seed))
+    track.write(output, posed_landmarks(rest, motion), args.fps)
+    print(f"wrote {output} ({frames} frames at {args.fps:g} fps)")
+    return 0
+
+
+def canonical_face_pixels():
+    """(68, 2) the canonical face drawn in a 512×512 frame: eyes 100 px apart."""
+    from puppet.template import MEAN_FACE
+
+    return MEAN_FACE * 100.0 + (256.0, 220.0)
+
+
+def _train(args: argparse.Namespace) -> int:
+    try:
+        from puppet import corpus, labels, train
+    except ImportError as error:
+        raise PuppetError(f"training needs the train extra ({error.name} is missing): pip install 'puppet[train]'") from None
+    import shutil
+    from dataclasses import replace as change
+
+    corpus.build(args.corpus, corpus.CorpusOptions(hours=args.hours, seed=args.seed))
+    labels.label(args.corpus)
+    config = train.TrainConfig(corpus=str(args.corpus), out=str(args.out))
+    if args.steps:
+        config = change(config, steps=args.steps)
+    train.train(config)
+    model = args.out / train.ONNX_FILE
+    if args.install:
+        from puppet.predictor import default_model
+
+        shutil.copyfile(model, default_model())
+        print(f"installed {model} as {default_model()}")
+    print(f"trained: {model}")
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    import json
+
+    from puppet.evaluate import format_table, score_corpus, score_videos
+
+    if args.corpus is None and args.videos is None:
+        raise PuppetError("give --corpus DIR (held-out synthetic voices) and/or --videos DIR (real talking videos)")
+    results = {}
+    if args.corpus is not None:
+        results["synthetic"] = score_corpus(args.corpus, args.limit)
+        print(format_table(f"held-out synthetic voices ({args.corpus})", results["synthetic"]))
+    if args.videos is not None:
+        results["video"] = score_videos(args.videos)
+        print(format_table(f"real talking videos ({args.videos})", results["video"]))
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1))
+    return 0

@@ -16,6 +16,7 @@ Metrics (lower is better, except the correlation):
 - D-Rot: mean head-rotation difference in degrees (synthetic voices only, where it is known);
 - lip correlation: Pearson correlation of predicted and real inner-lip opening.
 """
+import json
 from pathlib import Path
 from typing import Callable
 
@@ -26,7 +27,8 @@ from puppet import audio
 from puppet import landmarks as lm
 from puppet.detect import track
 from puppet.errors import PuppetError
-from puppet.features import MOTION_FPS
+from puppet.features import MOTION_FPS, SAMPLE_RATE, motion_frame_count
+from puppet.motion import resample
 
 Source = Callable[[np.ndarray], np.ndarray]  # (N,) float32 16 kHz → (T, 68, 3) canonical offsets
 JAW_AND_LIPS = list(lm.JAW) + list(lm.MOUTH)
@@ -83,15 +85,6 @@ def align_to(points: np.ndarray, target: np.ndarray) -> np.ndarray:
     return aligned
 
 
-def resample(sequence: np.ndarray, fps_in: float, fps_out: float, frames: int) -> np.ndarray:
-    """(frames, ...) linear interpolation in time of a (T, ...) sequence from fps_in to fps_out."""
-    t_out = np.arange(frames) / fps_out
-    t_in = np.arange(len(sequence)) / fps_in
-    flat = sequence.reshape(len(sequence), -1)
-    columns = [np.interp(t_out, t_in, flat[:, k]) for k in range(flat.shape[1])]
-    return np.stack(columns, axis=1).reshape((frames,) + sequence.shape[1:]).astype(np.float32)
-
-
 def video_reference(path: Path, cache: Path | None = None) -> tuple[np.ndarray, float, np.ndarray]:
     """Real landmarks of a talking video: ((T, 68, 2) float32 pixels, fps, (N,) float32 16 kHz audio).
 
@@ -145,6 +138,60 @@ def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sour
                 scores["D-Rot"] = float(np.degrees(np.abs(predicted_rotation[:frames] - rotation[:frames])).mean())
             totals[name].append(scores)
     return {name: {key: float(np.mean([s[key] for s in runs])) for key in runs[0]} for name, runs in totals.items() if runs}
+
+
+def baselines(canonical: np.ndarray) -> dict[str, Callable]:
+    """The sources every run scores: the learned network (when this install has one), the loudness
+    baseline and a static face; each maps 16 kHz speech to (offsets (T, 68, 3), rotation (T, 3) | None)."""
+    from puppet import lipsync, speaker
+    from puppet.loudness import loudness_motion
+
+    def static(samples):
+        return np.zeros((motion_frame_count(len(samples)), lm.N_LANDMARKS, 3), np.float32), None
+
+    def loudness(samples):
+        return loudness_motion(samples, SAMPLE_RATE, canonical, MOTION_FPS).offsets, None
+
+    sources = {"static": static, "loudness": loudness}
+    if lipsync.has_model():
+        def learned(samples):
+            return lipsync.shipped_predictor().predict(samples, speaker.embed(samples))
+
+        sources = {"learned": learned, **sources}
+    return sources
+
+
+def score_corpus(corpus: Path, limit: int) -> dict:
+    """Metrics on up to `limit` labelled utterances of a corpus's held-out speakers."""
+    from puppet.visemes import canonical_rest
+
+    manifest = corpus / "manifest.jsonl"
+    if not manifest.is_file():
+        raise PuppetError(f"{corpus} is not a corpus folder (no manifest.jsonl)")
+    entries = [json.loads(line) for line in manifest.read_text().splitlines() if line.strip()]
+    held = [e for e in entries if e.get("heldout") and (corpus / "targets" / f"{e['id']}.npz").is_file()][:limit]
+    if not held:
+        raise PuppetError(f"{corpus} has no labelled held-out utterances (run puppet train first)")
+    items = []
+    for entry in held:
+        target = np.load(corpus / "targets" / f"{entry['id']}.npz")
+        items.append((audio.load(corpus / "audio" / f"{entry['id']}.wav"), target["offsets"], target["rotation"]))
+    canonical = canonical_rest()
+    return score_synthetic(items, baselines(canonical), canonical)
+
+
+def score_videos(folder: Path, cache: Path | None = None) -> dict:
+    """Metrics averaged over the talking videos in a folder (each video counts once)."""
+    from puppet.visemes import canonical_rest
+
+    videos = sorted(p for p in Path(folder).glob("*") if p.suffix.lower() in (".mp4", ".mov", ".mkv"))
+    if not videos:
+        raise PuppetError(f"no .mp4/.mov/.mkv videos in {folder}")
+    canonical = canonical_rest()
+    sources = {name: (lambda s, f=f: f(s)[0]) for name, f in baselines(canonical).items()}
+    cache = cache or Path.home() / ".cache" / "puppet" / "tracks"
+    per_video = [score_video(path, sources, canonical, cache) for path in videos]
+    return {name: {key: float(np.mean([v[name][key] for v in per_video])) for key in per_video[0][name]} for name in sources}
 
 
 def format_table(title: str, scores: dict) -> str:

@@ -80,6 +80,16 @@ def face_axes(points: np.ndarray) -> np.ndarray:
     return np.array([x, [-x[1], x[0]]], dtype=np.float32)
 
 
+def from_face_units(offsets: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(T, 68, 3) float32 pixel offsets from offsets in this face's units: (T, 68, 3) in
+    inter-ocular distances along the face's own axes (x along the eye line, y down the face,
+    z toward the viewer), as the learned predictor gives them. points: (68, 2|3) the face, pixels."""
+    scale = face_scale(points)
+    x_axis, y_axis = face_axes(points)
+    xy = offsets[..., :1] * x_axis + offsets[..., 1:2] * y_axis
+    return (np.concatenate([xy, offsets[..., 2:3]], axis=-1) * scale).astype(np.float32)
+
+
 def with_depth(points: np.ndarray) -> np.ndarray:
     """(68, 3) float32: (68, 2|3) pixel points with z from CANONICAL_DEPTH scaled to this face.
 

@@ -65,3 +65,13 @@ class Motion:
             translation=self.translation + other.translation,
             fps=self.fps,
         )
+
+
+def resample(sequence: np.ndarray, fps_in: float, fps_out: float, frames: int) -> np.ndarray:
+    """(frames, ...) float32: a (T, ...) per-frame sequence at fps_in, linearly interpolated at the
+    centres of `frames` frames at fps_out (frame i covers [i/fps, (i+1)/fps)); ends are held."""
+    t_out = (np.arange(frames) + 0.5) / fps_out
+    t_in = (np.arange(len(sequence)) + 0.5) / fps_in
+    flat = sequence.reshape(len(sequence), -1)
+    columns = [np.interp(t_out, t_in, flat[:, k]) for k in range(flat.shape[1])]
+    return np.stack(columns, axis=1).reshape((frames,) + sequence.shape[1:]).astype(np.float32)

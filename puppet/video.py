@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from puppet import audio, export, track
+from puppet import audio, export, lipsync, track
 from puppet.bundle import Puppet
 from puppet.errors import PuppetError
 from puppet.life import LifeOptions, life_motion
-from puppet.loudness import LoudnessOptions, loudness_motion
+from puppet.loudness import LoudnessOptions, frame_count, loudness_motion
 from puppet.motion import Motion
 from puppet.pose import posed_landmarks
 from puppet.renderer import Background, Canvas, PuppetRenderer, headless_context
@@ -21,7 +21,7 @@ from puppet.renderer import Background, Canvas, PuppetRenderer, headless_context
 DEFAULT_FPS = 25.0
 DEFAULT_MAX_SIDE = 1080  # default output: the portrait's own size, no larger than this
 CHUNK_FRAMES = 250  # frames posed at a time (10 s at 25 fps): bounds memory on long inputs
-MOTION_SOURCES = ("loudness",)  # built-in sources; anything else given to --motion is a track file
+MOTION_SOURCES = ("learned", "loudness")  # built-in sources; anything else given to --motion is a track file
 
 
 @dataclass(frozen=True)
@@ -46,10 +46,16 @@ def make_motion(puppet: Puppet, audio_path: Path | None, options: VideoOptions) 
     rest = puppet.rig.landmarks
     if options.motion in MOTION_SOURCES:
         if audio_path is None:
-            raise PuppetError("the loudness motion needs an audio file")
+            raise PuppetError(f"the {options.motion} motion needs an audio file")
         samples = audio.load(audio_path)
         audio.check_audible(samples, str(audio_path))
-        speech = loudness_motion(samples, audio.ANALYSIS_RATE, rest, options.fps, options.loudness)
+        if options.motion == "learned":
+            if not lipsync.has_model():
+                raise PuppetError("this install has no trained lip-sync model: run `puppet train`, or use --motion loudness")
+            frames = frame_count(len(samples), audio.ANALYSIS_RATE, options.fps)
+            speech = lipsync.learned_motion(samples, rest, options.fps, frames)
+        else:
+            speech = loudness_motion(samples, audio.ANALYSIS_RATE, rest, options.fps, options.loudness)
         activity = _activity(speech)
         return speech + life_motion(len(speech), options.fps, rest, options.life, activity)
     landmarks, fps = track.read(options.motion)
@@ -76,7 +82,7 @@ def render(
     """Render the talking puppet to `output` (a video file or a folder of RGBA PNG frames)."""
     output = export.check_output(output, force)
     if landmarks_out is not None:
-        landmarks_out = _check_track_output(landmarks_out, force)
+        landmarks_out = check_track_output(landmarks_out, force)
     motion = make_motion(puppet, audio_path, options)
     size = options.size or output_size(puppet.rig.image_size)
     background = options.background or (Background() if output.suffix == "" else Background((1.0, 1.0, 1.0, 1.0)))
@@ -102,7 +108,7 @@ def render(
 
 
 
-def _check_track_output(path: Path, force: bool) -> Path:
+def check_track_output(path: Path, force: bool) -> Path:
     """The --landmarks-out path, checked before any work: an .npz in an existing folder."""
     path = Path(path)
     if path.suffix.lower() != ".npz":

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from conftest import drawn_face
 
-from puppet.articulation import JAW_OPEN_GAP, UNITS, blend, unit_offsets
+from puppet.articulation import JAW_OPEN_GAP, UNITS, blend, close_lips, unit_offsets
 from puppet.landmarks import (
     EYELID_PAIRS,
     INNER_LIP_PAIRS,
@@ -35,6 +35,8 @@ OWN_PARTS = {  # the points each unit may move
     "blink_left": {43, 44, 46, 47},
     "brow_raise": set(RIGHT_BROW) | set(LEFT_BROW),
     "brow_frown": set(RIGHT_BROW) | set(LEFT_BROW),
+    "upper_lip_raise": set(MOUTH),
+    "lower_lip_tuck": set(MOUTH),
 }
 
 
@@ -92,7 +94,7 @@ def test_units_turn_with_a_tilted_face():
 
 def test_lip_shapes_do_what_their_names_say():
     units = unit_offsets(REST)
-    width = lambda points: points[54, 0] - points[48, 0]  # noqa: E731
+    width = lambda points: points[54, 0] - points[48, 0]
     assert width(REST + units["lip_wide"]) > width(REST) + 10
     rounded = REST + units["lip_round"]
     assert width(rounded) < width(REST) - 15 and rounded[51, 2] > REST[51, 2] + 5  # narrower, pushed forward
@@ -108,6 +110,28 @@ def test_lip_press_closes_an_open_mouth():
     pressed = rest + unit_offsets(rest)["lip_press"]
     assert inner_gap(rest) > 19 and abs(inner_gap(pressed)) < 1e-3
     assert pressed[57, 1] - pressed[51, 1] < rest[57, 1] - rest[51, 1] - 20  # lips thinner as well as closed
+
+
+def test_upper_lip_raise_bares_the_teeth_and_lower_lip_tuck_rolls_the_lower_lip_up_and_in():
+    units = unit_offsets(REST)
+    raised = REST + units["upper_lip_raise"]
+    assert raised[51, 1] < REST[51, 1] - 5 and raised[62, 1] < REST[62, 1] - 4
+    assert np.all(units["upper_lip_raise"][list(range(55, 60)) + [65, 66, 67]] == 0)  # lower lip stays
+    tucked = REST + units["lower_lip_tuck"]
+    assert tucked[57, 1] < REST[57, 1] - 8 and tucked[66, 1] < REST[66, 1] - 6  # up ...
+    assert tucked[57, 2] < REST[57, 2] - 4 and tucked[66, 2] < REST[66, 2] - 6  # ... and back
+    assert np.all(units["lower_lip_tuck"][[50, 51, 52, 61, 62, 63]] == 0)  # upper lip stays
+
+
+def test_close_lips_shuts_any_mouth_shape_and_keeps_the_lips_thick():
+    units = unit_offsets(REST)
+    shapes = np.stack([REST, REST + units["jaw_open"], REST + 0.6 * units["jaw_open"] + units["lip_round"]])
+    closed = shapes + close_lips(shapes, np.ones(3, np.float32))
+    assert np.all(np.abs(inner_gap(closed)) < 1e-3)
+    np.testing.assert_allclose(closed[:, 57] - closed[:, 66], shapes[:, 57] - shapes[:, 66], atol=1e-4)
+    half = shapes + close_lips(shapes, np.full(3, 0.5, np.float32))
+    np.testing.assert_allclose(inner_gap(half), inner_gap(shapes) / 2, atol=1e-3)
+    assert np.all(close_lips(shapes, np.zeros(3, np.float32)) == 0)
 
 
 def test_blend_is_the_weighted_sum_per_frame():
