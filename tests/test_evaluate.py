@@ -1,0 +1,48 @@
+import numpy as np
+import pytest
+
+from puppet import evaluate
+from puppet.visemes import canonical_rest
+
+from conftest import shared
+
+
+def moving_face(frames=40, seed=0):
+    """(T, 68, 3) canonical faces whose jaw opens and closes."""
+    rest = canonical_rest()
+    opening = 0.3 * np.sin(np.linspace(0, 4 * np.pi, frames)) ** 2
+    faces = np.repeat(rest[None], frames, axis=0)
+    faces[:, 55:60, 1] += opening[:, None]
+    faces[:, 65:68, 1] += opening[:, None]
+    return faces + np.random.default_rng(seed).normal(0, 0.002, faces.shape).astype(np.float32)
+
+
+def test_identical_motion_scores_zero_and_perfect_correlation():
+    faces = moving_face()
+    scores = evaluate.metrics(faces, faces)
+    assert all(scores[k] == pytest.approx(0, abs=1e-9) for k in ["D-LL", "D-VL", "D-A", "D-L", "D-V"])
+    assert scores["lip_corr"] == pytest.approx(1.0)
+
+
+def test_a_still_face_scores_worse_than_the_motion_itself():
+    faces = moving_face()
+    still = np.repeat(canonical_rest()[None], len(faces), axis=0)
+    assert evaluate.metrics(still, faces)["D-A"] > 20
+    assert evaluate.metrics(moving_face(seed=1), faces)["D-A"] < 5
+
+
+def test_alignment_removes_head_pose():
+    faces = moving_face()[..., :2]
+    angle = np.radians(20)
+    turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    seen = faces @ turn.T * 90 + [300, 200]  # the same motion, turned, scaled and shifted
+    assert np.abs(evaluate.align_to(seen, canonical_rest()) - faces).max() < 0.01
+
+
+def test_real_video_is_tracked_and_baselines_are_scored(tmp_path):
+    video = shared("video", "face_1.mp4")
+    canonical = canonical_rest()
+    sources = {name: (lambda s, f=f: f(s)[0]) for name, f in evaluate.baselines(canonical).items()}
+    scores = evaluate.score_video(video, sources, canonical, cache=tmp_path)
+    assert abs(scores["static"]["lip_corr"]) < 1e-3 and scores["loudness"]["lip_corr"] > 0.2
+    assert (tmp_path / "face_1.npz").is_file()
