@@ -73,7 +73,7 @@ def _rates(steps: dict, seconds: float, rounds: int = 5) -> dict:
 def measure_render(puppet: bundle.Puppet, seconds: float) -> dict:
     """render_fps_* and floor_fps_* for each size in SIZES."""
     _, _, speech = bundle.demo_files()
-    motion = video.make_motion(puppet, speech, video.VideoOptions())
+    motion = video.make_motion(puppet, speech, video.VideoOptions(motion=video.default_motion()))
     positions = puppet.rig.animate(motion)
     figures = {}
     ctx = headless_context()
@@ -115,11 +115,43 @@ def measure_export(puppet: bundle.Puppet, clip_seconds: float) -> dict:
             out.setsampwidth(2)
             out.setframerate(audio.ANALYSIS_RATE)
             out.writeframes((np.clip(clip, -1, 1) * 32767).astype("<i2").tobytes())
-        options = video.VideoOptions(size=EXPORT_SIZE)
+        options = video.VideoOptions(size=EXPORT_SIZE, motion=video.default_motion())
         start = time.perf_counter()
         video.render(puppet, wav, Path(folder) / "clip.mp4", options, progress=False)
         elapsed = time.perf_counter() - start
     return {"export_seconds_512": round(elapsed, 2), "export_realtime_x_512": round(clip_seconds / elapsed, 2)}
+
+
+def measure_predictor(seconds: float) -> dict:
+    """predictor_ms_per_frame (streaming in 20 ms chunks, one thread) and predict_realtime_x (offline)."""
+    from puppet import lipsync, speaker
+    from puppet.predictor import Predictor
+
+    if not lipsync.has_model():
+        return {}
+    _, _, speech = bundle.demo_files()
+    samples = audio.load(speech)
+    embedding = speaker.embed(samples)
+    predictor = Predictor(threads=1)
+    chunk = audio.ANALYSIS_RATE // 50  # 20 ms, one motion frame
+
+    def stream_clip():
+        stream, frames = predictor.stream(embedding), 0
+        for start in range(0, len(samples), chunk):
+            frames += len(stream.push(samples[start : start + chunk])[0])
+        return frames
+
+    def offline_clip():
+        predictor.predict(samples, embedding)
+
+    frames = stream_clip()
+    stream_rate = _rates({"stream": stream_clip}, seconds, rounds=3)["stream"]
+    offline_rate = _rates({"offline": offline_clip}, seconds, rounds=3)["offline"]
+    clip_seconds = len(samples) / audio.ANALYSIS_RATE
+    return {
+        "predictor_ms_per_frame": round(1000 / (stream_rate * frames), 3),
+        "predict_realtime_x": round(offline_rate * clip_seconds, 1),
+    }
 
 
 def main(as_json: bool, seconds: float, clip_seconds: float) -> int:
@@ -131,6 +163,7 @@ def main(as_json: bool, seconds: float, clip_seconds: float) -> int:
     figures = {"machine": f"{platform.machine()}, {_cpu_count()} CPU cores, {renderer_name}"}
     figures.update(measure_render(puppet, seconds))
     figures.update(measure_export(puppet, clip_seconds))
+    figures.update(measure_predictor(seconds))
     if as_json:
         print(json.dumps(figures))
         return 0

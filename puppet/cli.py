@@ -166,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
 
         return bench_main(args.json, args.seconds, args.clip)
 
-    from puppet import lipsync, video
+    from puppet import video
 
     if args.demo:
         if args.input is not None:
@@ -181,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
         audio_path = args.audio
         if audio_path is None and args.motion in (None,) + video.MOTION_SOURCES:
             raise PuppetError("give an audio file after the portrait (or --motion TRACK.npz)")
-    motion = args.motion or ("learned" if lipsync.has_model() else "loudness")
+    motion = args.motion or video.default_motion()
     options = video.VideoOptions(fps=args.fps, background=args.background, samples=args.msaa, motion=motion)
     if args.size is not None:
         size = args.size if isinstance(args.size, tuple) else video.output_size(puppet.rig.image_size, args.size)

@@ -35,6 +35,11 @@ class VideoOptions:
     life: LifeOptions = field(default_factory=LifeOptions)  # blinks, idle head motion, breathing
 
 
+def default_motion() -> str:
+    """The learned lip-sync network when this install has one, else the loudness baseline."""
+    return "learned" if lipsync.has_model() else "loudness"
+
+
 def output_size(image_size: tuple[int, int], max_side: int = DEFAULT_MAX_SIDE) -> tuple[int, int]:
     """(width, height): the portrait's size scaled to at most `max_side`, rounded to even numbers."""
     scale = min(1.0, max_side / max(image_size))
