@@ -124,6 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     evaluate.add_argument("--corpus", type=Path, help="corpus folder: its held-out speakers are scored")
     evaluate.add_argument("--videos", type=Path, help="folder of talking-face videos with speech (.mp4, .mov, .mkv)")
+    evaluate.add_argument("--speech", type=Path, help="folder of real recordings with transcripts (NAME.wav + NAME.txt): what the mouth does on p/b/m, vowels, oo/ee and silence")
     evaluate.add_argument("--json", type=Path, help="also write the scores here")
     evaluate.add_argument("--limit", type=int, default=200, help="held-out utterances scored at most (default 200)")
 
@@ -263,10 +264,10 @@ def _train(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     import json
 
-    from puppet.evaluate import format_table, score_corpus, score_videos
+    from puppet.evaluate import format_table, score_corpus, score_phones, score_videos
 
-    if args.corpus is None and args.videos is None:
-        raise PuppetError("give --corpus DIR (held-out synthetic voices) and/or --videos DIR (real talking videos)")
+    if args.corpus is None and args.videos is None and args.speech is None:
+        raise PuppetError("give --corpus DIR (held-out synthetic voices), --videos DIR (real talking videos) and/or --speech DIR (recordings with transcripts)")
     results = {}
     if args.corpus is not None:
         results["synthetic"] = score_corpus(args.corpus, args.limit)
@@ -274,6 +275,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.videos is not None:
         results["video"] = score_videos(args.videos)
         print(format_table(f"real talking videos ({args.videos})", results["video"]))
+    if args.speech is not None:
+        results["speech"] = score_phones(args.speech)
+        print(format_table(f"real recordings, mouth per sound ({args.speech})", results["speech"]))
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     return 0

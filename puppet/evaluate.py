@@ -194,11 +194,61 @@ def score_videos(folder: Path, cache: Path | None = None) -> dict:
     return {name: {key: float(np.mean([v[name][key] for v in per_video])) for key in per_video[0][name]} for name in sources}
 
 
+CLOSURES = {"P", "B", "M"}
+OPEN_VOWELS = {"AA", "AE", "AH", "AO", "AW", "AY"}
+ROUNDED = {"UW", "UH", "OW", "W"}
+SPREAD = {"IY", "IH", "EY"}
+LONG_SILENCE = 0.3  # seconds: silences at least this long count as rest
+
+
+def score_phones(folder: Path) -> dict:
+    """What the mouth does on each kind of sound in real recordings with transcripts
+    (`NAME.wav` + `NAME.txt`), aligned with puppet's own aligner. Per source, in IOD units:
+    inner-lip opening at the centres of p/b/m, of open vowels and in long silences, and mouth
+    width on oo/w over width on ee (below 1: the lips round)."""
+    from puppet.alignment import align
+    from puppet.visemes import canonical_rest
+
+    clips = sorted(p for p in Path(folder).glob("*.wav") if p.with_suffix(".txt").is_file())
+    if not clips:
+        raise PuppetError(f"no NAME.wav + NAME.txt pairs in {folder}")
+    canonical = canonical_rest()
+    sources = baselines(canonical)
+    found: dict[str, dict[str, list]] = {name: {k: [] for k in ("closure", "open", "silence", "rounded", "spread")} for name in sources}
+    for clip in clips:
+        samples = audio.load(clip)
+        phones = align(samples, clip.with_suffix(".txt").read_text())
+        for name, source in sources.items():
+            points = canonical[None] + source(samples)[0]
+            opening = lip_opening(points)
+            width = np.linalg.norm(points[:, 54, :2] - points[:, 48, :2], axis=1)
+            for phone in phones:
+                frame = min(int((phone.start + phone.end) / 2 * MOTION_FPS), len(points) - 1)
+                kind = ("closure" if phone.phone in CLOSURES else "open" if phone.phone in OPEN_VOWELS else
+                        "silence" if phone.phone == "SIL" and phone.end - phone.start >= LONG_SILENCE else None)
+                if kind:
+                    found[name][kind].append(opening[frame])
+                if phone.phone in ROUNDED or phone.phone in SPREAD:
+                    found[name]["rounded" if phone.phone in ROUNDED else "spread"].append(width[frame])
+    rest = float(lip_opening(canonical[None])[0])
+    return {
+        name: {
+            "rest_gap": rest,
+            "p/b/m_gap": float(np.mean(v["closure"])),
+            "vowel_gap": float(np.mean(v["open"])),
+            "silence_gap": float(np.mean(v["silence"])) if v["silence"] else float("nan"),
+            "oo/ee_width": float(np.mean(v["rounded"]) / np.mean(v["spread"])),
+        }
+        for name, v in found.items()
+    }
+
+
 def format_table(title: str, scores: dict) -> str:
     """A plain-text table of {source: {metric: value}}."""
     keys = list(next(iter(scores.values())))
-    lines = [title, f"{'source':<12}" + "".join(f"{k:>10}" for k in keys)]
+    widths = [max(10, len(k) + 2) for k in keys]
+    lines = [title, f"{'source':<12}" + "".join(f"{k:>{w}}" for k, w in zip(keys, widths))]
     for name, values in scores.items():
-        lines.append(f"{name:<12}" + "".join(f"{values[k]:>10.3f}" for k in keys))
+        lines.append(f"{name:<12}" + "".join(f"{values[k]:>{w}.3f}" for k, w in zip(keys, widths)))
     return "\n".join(lines)
 
