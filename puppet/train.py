@@ -62,9 +62,9 @@ class TrainConfig:
     lr: float = 1e-3  # peak learning rate (Adam)
     min_lr: float = 1e-5  # the cosine schedule's floor
     warmup_steps: int = 200  # linear warm-up before the cosine decay
-    steps: int = 30000  # total optimizer steps (a resumed run continues up to this)
-    eval_every: int = 500  # steps between evaluations on the held-out speakers
-    checkpoint_every: int = 1000  # steps between checkpoints
+    steps: int = 10000  # total optimizer steps (a resumed run continues up to this); the shipped model: 10000
+    eval_every: int = 1000  # steps between evaluations on the held-out speakers
+    checkpoint_every: int = 250  # steps between checkpoints
     log_every: int = 10  # steps between training-loss lines in log.jsonl
     laplacian_weight: float = 1.0  # λ of Eq. 8 and 12 (paper: 1)
     rotation_weight: float = 10.0  # head rotation (radians²) against landmark positions (IOD², summed over 68)

@@ -138,3 +138,18 @@ def test_help_lists_the_commands(capsys):
         main(["--help"])
     out = capsys.readouterr().out
     assert "render" in out and "rig" in out and "bench" in out
+
+
+@pytest.mark.skipif(not __import__("puppet.lipsync").lipsync.has_model(), reason="no trained model")
+def test_predict_writes_a_track_that_render_plays(files, capsys, demo, demo_speech):
+    from puppet import track
+
+    face = files["dir"] / "face.txt"
+    np.savetxt(face, demo.rig.landmarks[:, :2])
+    out = files["dir"] / "motion.npz"
+    assert main(["predict", str(demo_speech), "--face", str(face), "-o", str(out)]) == 0
+    landmarks, fps = track.read(out)
+    assert fps == 25 and landmarks.shape[1:] == (68, 3)
+    assert np.abs(landmarks[0, :, :2] - demo.rig.landmarks[:, :2]).max() < 0.3 * 92  # the face's own landmarks, in motion
+    video = files["dir"] / "from_track.mp4"
+    assert main(["render", str(files["image"]), str(demo_speech), "--landmarks", str(files["landmarks"]), "--motion", str(out), "-o", str(video), "-q", "--size", "96"]) == 0
