@@ -36,11 +36,6 @@ class Motion:
     def __len__(self) -> int:
         return len(self.offsets)
 
-    @property
-    def duration(self) -> float:
-        """Seconds."""
-        return len(self) / self.fps
-
     @classmethod
     def still(cls, frames: int, fps: float) -> "Motion":
         """A puppet at rest for `frames` frames."""
