@@ -27,6 +27,7 @@ could not follow the per-utterance seed; its speaking rate is still varied per u
 """
 import argparse
 import json
+import multiprocessing
 import os
 import re
 import shutil
@@ -38,7 +39,6 @@ from contextlib import closing
 from dataclasses import asdict, dataclass
 from functools import cache
 from itertools import pairwise
-from multiprocessing import Pool
 from pathlib import Path
 
 import numpy as np
@@ -239,7 +239,8 @@ def render_in_order(todo, folder: Path, jobs: int):
     if jobs <= 1:
         yield from (render(utterance, folder) for utterance in todo)
         return
-    with Pool(jobs) as pool:
+    # "spawn": forking a process that already runs torch or onnxruntime threads can deadlock.
+    with multiprocessing.get_context("spawn").Pool(jobs) as pool:
         pending = deque()
         for utterance in todo:
             pending.append(pool.apply_async(render, (utterance, folder)))

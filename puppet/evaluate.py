@@ -125,7 +125,7 @@ def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sour
     """{source name: metrics averaged over utterances} on held-out synthetic voices.
 
     items: (samples (N,), target offsets (T, 68, 3), target rotation (T, 3)); a source returns
-    (offsets, rotation or None) for samples.
+    (offsets, rotation or None: a still head) for samples.
     """
     totals: dict[str, list[dict]] = {name: [] for name in sources}
     for samples, offsets, rotation in items:
@@ -134,8 +134,9 @@ def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sour
             predicted_offsets, predicted_rotation = source(samples)
             frames = min(len(predicted_offsets), len(offsets))
             scores = metrics(canonical[None] + predicted_offsets[:frames], reference[:frames])
-            if predicted_rotation is not None:
-                scores["D-Rot"] = float(np.degrees(np.abs(predicted_rotation[:frames] - rotation[:frames])).mean())
+            if predicted_rotation is None:  # a source without head motion holds the head still
+                predicted_rotation = np.zeros_like(rotation)
+            scores["D-Rot"] = float(np.degrees(np.abs(predicted_rotation[:frames] - rotation[:frames])).mean())
             totals[name].append(scores)
     return {name: {key: float(np.mean([s[key] for s in runs])) for key in runs[0]} for name, runs in totals.items() if runs}
 

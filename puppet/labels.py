@@ -16,11 +16,11 @@ is not there yet is left for the next run.
 """
 import argparse
 import json
+import multiprocessing
 import os
 import sys
 import time
 from functools import partial
-from multiprocessing import Pool
 from pathlib import Path
 
 import numpy as np
@@ -111,7 +111,8 @@ def label(corpus_dir: Path, workers: int = WORKERS) -> None:
     (corpus_dir / "phones").mkdir(exist_ok=True)
     (corpus_dir / "targets").mkdir(exist_ok=True)
     started, seconds = time.monotonic(), 0.0
-    with Pool(workers) as pool, open(corpus_dir / FAILURES, "a") as failures:
+    # "spawn": forking a process that already runs torch or onnxruntime threads can deadlock.
+    with multiprocessing.get_context("spawn").Pool(workers) as pool, open(corpus_dir / FAILURES, "a") as failures:
         progress = tqdm(pool.imap_unordered(partial(label_one, corpus_dir), todo),
                         total=len(todo), desc="labelling", unit="utt")
         for name, error, duration in progress:
