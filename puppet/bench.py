@@ -30,6 +30,7 @@ from puppet.renderer import (
 
 SIZES = {"512": (512, 512), "1080": (1920, 1080)}
 EXPORT_SIZE = (512, 512)
+EXPORT_RUNS = 2  # the export figure is the faster of this many whole renders
 
 
 class FloorQuad:
@@ -103,7 +104,7 @@ def measure_render(puppet: bundle.Puppet, seconds: float) -> dict:
 
 
 def measure_export(puppet: bundle.Puppet, clip_seconds: float) -> dict:
-    """export_realtime_x_512: a whole render of a clip_seconds clip at 512×512, 25 fps."""
+    """export_realtime_x_512: the best of EXPORT_RUNS whole renders of a clip_seconds clip at 512×512, 25 fps."""
     _, _, speech = bundle.demo_files()
     samples = audio.load(speech)
     repeats = int(np.ceil(clip_seconds * audio.ANALYSIS_RATE / len(samples)))
@@ -116,9 +117,11 @@ def measure_export(puppet: bundle.Puppet, clip_seconds: float) -> dict:
             out.setframerate(audio.ANALYSIS_RATE)
             out.writeframes((np.clip(clip, -1, 1) * 32767).astype("<i2").tobytes())
         options = video.VideoOptions(size=EXPORT_SIZE, motion=video.default_motion())
-        start = time.perf_counter()
-        video.render(puppet, wav, Path(folder) / "clip.mp4", options, progress=False)
-        elapsed = time.perf_counter() - start
+        elapsed = float("inf")
+        for _ in range(EXPORT_RUNS):
+            start = time.perf_counter()
+            video.render(puppet, wav, Path(folder) / "clip.mp4", options, force=True, progress=False)
+            elapsed = min(elapsed, time.perf_counter() - start)
     return {"export_seconds_512": round(elapsed, 2), "export_realtime_x_512": round(clip_seconds / elapsed, 2)}
 
 

@@ -112,7 +112,7 @@ class Rig:
         neck pivot (orthographic projection); border vertices stay put. Frames that would
         fold a triangle have their head motion, then their offsets, scaled back until none does.
         """
-        offsets = _close_overlapping_lips(self.landmarks, motion.offsets)
+        offsets = _close_overlapping_lips(self.landmarks, _tie_mouth_corners(motion.offsets))
         target = self._place(motion, offsets, 1.0, 1.0)
         bad = np.flatnonzero(self._folded(target))
         for frame in bad:
@@ -194,10 +194,30 @@ def _separate_crossed_lips(points: np.ndarray) -> np.ndarray:
     return points
 
 
+def _tie_mouth_corners(offsets: np.ndarray) -> np.ndarray:
+    """(T, 68, 3) offsets with each inner mouth corner moving exactly as its outer corner: the thin
+    triangles between them (lips meet at the corners) would otherwise fold under small differences."""
+    offsets = offsets.copy()
+    for inner, outer in zip(lm.INNER_MOUTH_CORNERS, lm.MOUTH_CORNERS):
+        offsets[:, inner] = offsets[:, outer]
+    return offsets
+
+
+UPPER_LIP = [49, 50, 51, 52, 53, 61, 62, 63]
+LOWER_LIP = [55, 56, 57, 58, 59, 65, 66, 67]
+
+
 def _close_overlapping_lips(rest: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """(T, 68, 3) offsets with inner-lip pairs that would cross meeting at their midpoint instead."""
+    """(T, 68, 3) offsets where lips asked to close past each other (a closed portrait given a
+    motion that closes a more open face) stop where they meet: both lips are moved back apart
+    by half the mean overlap each, then any inner-lip pair still crossed meets at its midpoint."""
     offsets = offsets.copy()
     down = lm.face_axes(rest)[1]
+    upper, lower = (list(side) for side in zip(*lm.INNER_LIP_PAIRS))
+    gap = ((rest[lower, :2] + offsets[:, lower, :2]) - (rest[upper, :2] + offsets[:, upper, :2])) @ down  # (T, 3)
+    overlap = np.maximum(0.0, -gap.mean(axis=1))[:, None, None] * np.append(down, 0.0)  # (T, 1, 3)
+    offsets[:, UPPER_LIP] -= overlap / 2
+    offsets[:, LOWER_LIP] += overlap / 2
     for upper, lower in lm.INNER_LIP_PAIRS:
         up, low = rest[upper] + offsets[:, upper], rest[lower] + offsets[:, lower]
         crossed = (low[:, :2] - up[:, :2]) @ down < 0

@@ -3,7 +3,7 @@ run through onnxruntime (exported by `puppet.voice_encoder`).
 
 As in Resemblyzer: the voice is normalised to -30 dBFS (only raised), long silences are cut,
 power mels (40 channels, 25 ms Hann window, 10 ms hop) are cut into 1.6 s partials at 1.3 per
-second, each partial is embedded, and the mean is normalised. One difference: silences are found
+second, each partial is embedded, and the mean is normalised (over the first MAX_VOICE_SECONDS of speech). One difference: silences are found
 by an energy detector instead of WebRTC's VAD (not a dependency here), the same in training
 and at run time.
 """
@@ -30,6 +30,7 @@ VAD_SMOOTHING = 8  # windows averaged
 VAD_MAX_SILENCE = 6  # windows of silence kept between voiced ones
 VAD_RANGE_DB = 40.0  # windows this far below the loudest are silence ...
 VAD_ABOVE_FLOOR_DB = 12.0  # ... and so are those within this of the quietest tenth
+MAX_VOICE_SECONDS = 12.0  # a voice is known from its first seconds of speech: longer clips are not embedded whole
 MODEL_FILE = "voice_encoder.onnx"
 
 
@@ -86,7 +87,7 @@ class SpeakerEncoder:
 
     def embed(self, samples: np.ndarray) -> np.ndarray:
         """(256,) float32 unit vector for (N,) float32 mono 16 kHz speech."""
-        voice = prepare(samples)
+        voice = prepare(samples)[: int(MAX_VOICE_SECONDS * SAMPLE_RATE)]
         slices = partial_slices(len(voice))
         voice = np.pad(voice, (0, max(0, slices[-1].stop * HOP - len(voice))))
         mels = encoder_mels(voice)
