@@ -12,6 +12,7 @@ from tqdm import tqdm
 from puppet import audio, export, lipsync, track
 from puppet.bundle import Puppet
 from puppet.errors import PuppetError
+from puppet.landmarks import face_scale
 from puppet.life import LifeOptions, life_motion
 from puppet.loudness import LoudnessOptions, frame_count, loudness_motion
 from puppet.motion import Motion
@@ -20,6 +21,7 @@ from puppet.renderer import Background, Canvas, PuppetRenderer, headless_context
 
 DEFAULT_FPS = 25.0
 DEFAULT_MAX_SIDE = 1080  # default output: the portrait's own size, no larger than this
+FOREIGN_TRACK = 0.25  # a track whose landmarks sit this far (IOD, median) from the portrait's is another face's
 CHUNK_FRAMES = 250  # frames posed at a time (10 s at 25 fps): bounds memory on long inputs
 MOTION_SOURCES = ("learned", "loudness")  # built-in sources; anything else given to --motion is a track file
 
@@ -66,7 +68,10 @@ def make_motion(puppet: Puppet, audio_path: Path | None, options: VideoOptions) 
     landmarks, fps = track.read(options.motion)
     if abs(fps - options.fps) > 1e-6:
         raise PuppetError(f"{options.motion} is at {fps:g} fps; render it with --fps {fps:g}")
-    return track.motion_from_track(landmarks, rest, fps)
+    motion = track.motion_from_track(landmarks, rest, fps)
+    if np.median(np.linalg.norm(motion.offsets[..., :2], axis=2)) > FOREIGN_TRACK * face_scale(rest):
+        raise PuppetError(f"{options.motion} moves another face than this portrait's (make it with --landmarks-out, or puppet predict --face with this portrait's landmarks)")
+    return motion
 
 
 def _activity(speech: Motion) -> np.ndarray:

@@ -1,5 +1,6 @@
 import av
 import numpy as np
+import pytest
 
 from puppet import audio, track, video
 from puppet.renderer import Background
@@ -56,3 +57,16 @@ def test_output_size_defaults_to_the_portrait_capped_and_even():
     assert video.output_size((3001, 1001)) == (1080, 360)
     width, height = video.output_size((641, 481))
     assert width % 2 == height % 2 == 0 and abs(width - 641) <= 1 and abs(height - 481) <= 1
+
+
+def test_a_track_of_another_face_is_refused(tmp_path, demo, demo_speech):
+    from dataclasses import replace
+
+    from puppet.errors import PuppetError
+
+    landmarks, _ = np.repeat(demo.rig.landmarks[None] * 0.5 + 40, 10, axis=0), 25
+    track.write(tmp_path / "other.npz", landmarks.astype(np.float32), 25)
+    options = replace(video.VideoOptions(size=(64, 64)), motion=str(tmp_path / "other.npz"))
+    with pytest.raises(PuppetError, match="another face"):
+        video.render(demo, demo_speech, tmp_path / "x.mp4", options, progress=False)
+    assert not (tmp_path / "x.mp4").exists()
