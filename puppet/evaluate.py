@@ -2,7 +2,8 @@
 real talking videos, for any motion source beside the baselines.
 
 Every source is a function from 16 kHz speech to canonical offsets `(T, 68, 3)` at MOTION_FPS
-(inter-ocular-distance units, head frame; see `puppet.visemes.canonical_rest`). Real videos are
+(inter-ocular-distance units, head frame; see `puppet.visemes.canonical_rest`) and a head
+rotation `(T, 3)`, or None for a still head. Real videos are
 tracked with the project's own detector; each frame is aligned to the canonical face by a
 similarity fit on the stable points (eye corners, nose), which removes head pose, and the
 speaker's own rest face is the clip's per-landmark median: a prediction is that rest plus the
@@ -30,7 +31,8 @@ from puppet.errors import PuppetError
 from puppet.features import MOTION_FPS, SAMPLE_RATE, motion_frame_count
 from puppet.motion import resample
 
-Source = Callable[[np.ndarray], np.ndarray]  # (N,) float32 16 kHz → (T, 68, 3) canonical offsets
+# (N,) float32 16 kHz speech → ((T, 68, 3) canonical offsets, (T, 3) head rotation or None: a still head)
+Source = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]
 JAW_AND_LIPS = list(lm.JAW) + list(lm.MOUTH)
 STABLE_POINTS = [36, 39, 42, 45, 27, 28, 29, 30, 31, 33, 35]  # eye corners, nose: no speech motion
 
@@ -116,12 +118,12 @@ def score_video(path: Path, sources: dict[str, Source], canonical: np.ndarray, c
     rest = np.median(aligned, axis=0)
     scores = {}
     for name, source in sources.items():
-        offsets = resample(source(samples), MOTION_FPS, fps, len(points))[valid]
+        offsets = resample(source(samples)[0], MOTION_FPS, fps, len(points))[valid]
         scores[name] = metrics(rest[None] + offsets[..., :2], aligned)
     return scores
 
 
-def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sources: dict[str, Callable], canonical: np.ndarray) -> dict:
+def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sources: dict[str, Source], canonical: np.ndarray) -> dict:
     """{source name: metrics averaged over utterances} on held-out synthetic voices.
 
     items: (samples (N,), target offsets (T, 68, 3), target rotation (T, 3)); a source returns
@@ -141,7 +143,7 @@ def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sour
     return {name: {key: float(np.mean([s[key] for s in runs])) for key in runs[0]} for name, runs in totals.items() if runs}
 
 
-def baselines(canonical: np.ndarray) -> dict[str, Callable]:
+def baselines(canonical: np.ndarray) -> dict[str, Source]:
     """The sources every run scores: the learned network (when this install has one), the loudness
     baseline and a static face; each maps 16 kHz speech to (offsets (T, 68, 3), rotation (T, 3) | None)."""
     from puppet import lipsync, speaker
@@ -189,7 +191,7 @@ def score_videos(folder: Path, cache: Path | None = None) -> dict:
     if not videos:
         raise PuppetError(f"no .mp4/.mov/.mkv videos in {folder}")
     canonical = canonical_rest()
-    sources = {name: (lambda s, f=f: f(s)[0]) for name, f in baselines(canonical).items()}
+    sources = baselines(canonical)
     cache = cache or Path.home() / ".cache" / "puppet" / "tracks"
     per_video = [score_video(path, sources, canonical, cache) for path in videos]
     return {name: {key: float(np.mean([v[name][key] for v in per_video])) for key in per_video[0][name]} for name in sources}

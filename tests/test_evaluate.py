@@ -1,10 +1,9 @@
 import numpy as np
 import pytest
+from conftest import shared
 
 from puppet import evaluate
 from puppet.visemes import canonical_rest
-
-from conftest import shared
 
 
 def moving_face(frames=40, seed=0):
@@ -42,7 +41,6 @@ def test_alignment_removes_head_pose():
 def test_real_video_is_tracked_and_baselines_are_scored(tmp_path):
     video = shared("video", "face_1.mp4")
     canonical = canonical_rest()
-    sources = {name: (lambda s, f=f: f(s)[0]) for name, f in evaluate.baselines(canonical).items()}
-    scores = evaluate.score_video(video, sources, canonical, cache=tmp_path)
+    scores = evaluate.score_video(video, evaluate.baselines(canonical), canonical, cache=tmp_path)
     assert abs(scores["static"]["lip_corr"]) < 1e-3 and scores["loudness"]["lip_corr"] > 0.2
     assert (tmp_path / "face_1.npz").is_file()
