@@ -8,6 +8,8 @@ from pathlib import Path
 from puppet.errors import PuppetError
 from puppet.template import POINTS_HELP
 
+EXPRESSION_NAMES = ("neutral", "happy", "angry", "surprised", "sad")  # puppet.expression.EXPRESSIONS, without importing numpy for --help
+
 NAMED_COLOURS = {
     "white": "#ffffff",
     "black": "#000000",
@@ -71,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--background", type=parse_background, help="'transparent', white, black, green, blue, magenta, grey or #rrggbb (default: transparent for frames, white for video)")
     render.add_argument("--msaa", type=int, default=4, choices=(0, 2, 4, 8), help="anti-aliasing samples per pixel (default 4)")
     render.add_argument("--seed", type=int, default=0, help="seed for blinks and idle motion (default 0)")
+    render.add_argument("--expression", choices=list(EXPRESSION_NAMES), default="neutral", help="a mood held through the clip: brows, eyes, mouth corners (default neutral)")
     render.add_argument("--landmarks-out", type=Path, help="also write the motion track (.npz: landmarks (T,68,3), fps)")
     render.add_argument("-f", "--force", action="store_true", help="overwrite existing outputs")
     render.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -83,10 +86,50 @@ def build_parser() -> argparse.ArgumentParser:
         "  puppet rig monster.png --points 210,240 300,238 256,300 220,350 292,352",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    rig.add_argument("image", type=Path, help="portrait image")
+    rig.add_argument("image", type=Path, help="portrait image (or, with --edit, a bundle to edit again)")
     rig.add_argument("-o", "--output", type=Path, help="bundle folder to write (default: IMAGE's name + .puppet beside it)")
     _add_rigging_arguments(rig)
+    rig.add_argument("--edit", action="store_true", help="open the rig editor: drag any landmark, preview (Space), save (S)")
     rig.add_argument("-f", "--force", action="store_true", help="overwrite an existing bundle")
+
+    live = commands.add_parser(
+        "live",
+        help="the puppet in a window, lip-synced to your microphone (and into OBS as a virtual camera)",
+        description="Open a window where the portrait talks with your microphone: streaming lip sync, blinks, idle "
+        "motion and expression hotkeys (press H in the window). --virtual-camera also sends it to OBS, Zoom, Meet, ...; "
+        "--audio FILE drives the same pipeline from a recording played back in sync.",
+        epilog="examples:\n  puppet live --demo\n  puppet live cartoon.puppet --virtual-camera --background green\n"
+        "  puppet live face.jpg --device 'USB'      (see --list-devices)\n"
+        "  puppet live --demo --audio speech.wav --duration 10 --stats stats.json\n\n"
+        "latency: the window's readout (F) says how far the picture trails your voice; delay the microphone\n"
+        "by that much in OBS (Audio Mixer > Advanced Audio Properties > Sync Offset) so voice and lips line up.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    live.add_argument("input", nargs="?", type=Path, help="portrait image or puppet bundle folder")
+    live.add_argument("--demo", action="store_true", help="use the bundled character")
+    _add_rigging_arguments(live)
+    live.add_argument("--list-devices", action="store_true", help="list audio input devices and exit")
+    live.add_argument("--device", help="microphone: index or part of its name (default: the system's default input)")
+    live.add_argument("--audio", type=Path, help="drive the puppet from this recording instead of the microphone, played back in sync")
+    live.add_argument("--no-playback", action="store_true", help="with --audio: do not play the recording aloud")
+    live.add_argument("--loop", action="store_true", help="with --audio: start the recording again at its end")
+    live.add_argument("--virtual-camera", action="store_true", help="also send frames to the system virtual camera (OBS Virtual Camera, v4l2loopback), over the key colour")
+    live.add_argument("--camera-device", help="the virtual camera device to use (e.g. /dev/video2)")
+    live.add_argument("--background", type=parse_background, help="'transparent' (the default: a see-through window where the desktop allows, else the key colour) or a colour: green, blue, magenta, #rrggbb ...")
+    live.add_argument("--size", type=parse_size, help="window and camera WIDTHxHEIGHT, or one number for the longer side (default: the portrait's shape, 720 tall at most)")
+    live.add_argument("--fps", type=float, help="frames per second (default: the display's refresh rate)")
+    live.add_argument("--msaa", type=int, default=0, choices=(0, 2, 4, 8), help="anti-aliasing samples per pixel (default 0: the mouth rim is smoothed in the shader anyway)")
+    live.add_argument("--expression", choices=list(EXPRESSION_NAMES), help="starting expression (keys 1-5 change it)")
+    live.add_argument("--sensitivity", type=float, help="voice gain in dB (keys + and -); saved with the puppet")
+    live.add_argument("--gate", type=float, help="noise gate in dBFS: quieter sound counts as silence (keys [ and ]); saved with the puppet")
+    live.add_argument("--blink-rate", type=float, help="blinks per minute (keys , and .); saved with the puppet")
+    live.add_argument("--push-to-talk", action="store_true", help="the mouth moves only while Space is held (key T toggles)")
+    live.add_argument("--show-stats", action="store_true", help="show fps and latency in the window (key F toggles)")
+    live.add_argument("--duration", type=float, help="stop after this many seconds")
+    live.add_argument("--stats", type=Path, help="on exit, write fps, latency percentiles and dropped frames to this JSON file")
+    live.add_argument("--no-window", action="store_true", help="render offscreen without a window (with --virtual-camera on a machine without a desktop, or for --stats)")
+    live.add_argument("--seed", type=int, default=0, help="seed for blinks and idle motion (default 0)")
+    live.add_argument("-f", "--force", action="store_true", help="overwrite an existing --stats file")
 
     predict = commands.add_parser(
         "predict",
@@ -152,10 +195,19 @@ def run(args: argparse.Namespace) -> int:
 
     if args.command == "rig":
         puppet = bundle.load(args.image, args.landmarks, points)
-        folder = bundle.save(puppet, args.output or args.image.with_suffix(".puppet"), args.force)
+        output = args.output or (args.image if args.image.is_dir() else args.image.with_suffix(".puppet"))
+        if args.edit:
+            from puppet.editor import edit
+
+            folder = edit(puppet, output, args.force or output == args.image)
+            print(f"saved {folder}" if folder else "closed without saving")
+            return 0
+        folder = bundle.save(puppet, output, args.force)
         print(f"rigged {args.image} -> {folder}  (check {folder / bundle.PREVIEW_FILE}; render with: puppet render {folder} SPEECH.wav -o out.mp4)")
         return 0
 
+    if args.command == "live":
+        return _live(args, points)
     if args.command == "predict":
         return _predict(args)
     if args.command == "train":
@@ -183,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
         if audio_path is None and args.motion in (None,) + video.MOTION_SOURCES:
             raise PuppetError("give an audio file after the portrait (or --motion TRACK.npz)")
     motion = args.motion or video.default_motion()
-    options = video.VideoOptions(fps=args.fps, background=args.background, samples=args.msaa, motion=motion)
+    options = video.VideoOptions(fps=args.fps, background=args.background, samples=args.msaa, motion=motion, expression=args.expression)
     if args.size is not None:
         size = args.size if isinstance(args.size, tuple) else video.output_size(puppet.rig.image_size, args.size)
         options = replace(options, size=size)
@@ -281,3 +333,74 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     return 0
+
+
+def _live(args: argparse.Namespace, points) -> int:
+    """`puppet live`: everything checked before the window opens, then the loop."""
+    from puppet import bundle, capture, live, settings
+    from puppet.video import output_size
+
+    if args.list_devices:
+        print(capture.list_devices())
+        return 0
+    if args.demo == (args.input is not None):
+        raise PuppetError("give a portrait (image or bundle) or --demo")
+    if args.stats is not None:
+        if args.stats.exists() and not args.force:
+            raise PuppetError(f"{args.stats} exists; use --force to overwrite")
+        if not args.stats.parent.is_dir():
+            raise PuppetError(f"output folder does not exist: {args.stats.parent}")
+    if args.audio is None and (args.no_playback or args.loop):
+        raise PuppetError("--no-playback and --loop are for --audio FILE")
+    if args.demo:
+        image, landmark_file, _ = bundle.demo_files()
+        puppet, source_path = bundle.load(image, landmark_file), None
+    else:
+        puppet, source_path = bundle.load(args.input, args.landmarks, points), args.input
+    path = settings.settings_path(source_path, puppet.name)
+    chosen = settings.load(path)
+    overrides = {"expression": args.expression, "sensitivity_db": args.sensitivity, "gate_db": args.gate, "blink_rate": args.blink_rate}
+    chosen = replace(chosen, **{k: v for k, v in overrides.items() if v is not None})
+    chosen = replace(chosen, push_to_talk=chosen.push_to_talk or args.push_to_talk, show_stats=chosen.show_stats or args.show_stats).clamped()
+
+    size = args.size if isinstance(args.size, tuple) else output_size(puppet.rig.image_size, args.size or 720)
+    options = live.LiveOptions(size=size, fps=args.fps, samples=args.msaa, duration=args.duration, seed=args.seed)
+    if args.background is not None:
+        options = replace(options, background=args.background)
+        if args.background.opaque:
+            options = replace(options, key=args.background.rgba[:3])
+    if args.audio is not None:
+        source = capture.FilePlayer(args.audio, playback=not args.no_playback, loop=args.loop)
+    else:
+        source = capture.Microphone(args.device)
+    camera = None
+    if args.virtual_camera:
+        from puppet.camera import VirtualCamera
+
+        camera = VirtualCamera(size, args.fps or 30.0, tuple(round(c * 255) for c in options.key), args.camera_device)
+    display = None
+    try:
+        display = _open_display(args.no_window, puppet.name, size, options)
+        if camera is not None:
+            print(f"sending frames to the virtual camera: {camera.name}")
+        stats = live.run(puppet, source, display, options, chosen, camera, path)
+    finally:
+        if display is not None:
+            display.close()
+        if camera is not None:
+            camera.close()
+    if args.stats is not None:
+        summary = live.write_stats(args.stats, stats, {"size": list(size), "source": source.name, "window": not args.no_window})
+        print(f"wrote {args.stats}: {summary['fps']} fps, latency p50 {summary['latency_ms_p50']} ms, p95 {summary['latency_ms_p95']} ms, {summary['dropped_frames']} dropped frames")
+    return 0
+
+
+def _open_display(offscreen: bool, name: str, size: tuple[int, int], options):
+    """The live loop's display: a window, or an offscreen canvas on a headless EGL context."""
+    from puppet.window import Offscreen, Window
+
+    if offscreen:
+        from puppet.renderer import headless_context
+
+        return Offscreen(headless_context(), size, options.samples, owns_context=True)
+    return Window(f"puppet live: {name}", size, transparent=not options.background.opaque)

@@ -3,7 +3,7 @@
 The whole offline pipeline reads top to bottom in `render`; frames are rendered headless and
 handed to the output as they come, so memory stays flat however long the audio is.
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +12,7 @@ from tqdm import tqdm
 from puppet import audio, export, lipsync, track
 from puppet.bundle import Puppet
 from puppet.errors import PuppetError
+from puppet.expression import expression_offsets
 from puppet.landmarks import face_scale
 from puppet.life import LifeOptions, life_motion
 from puppet.loudness import LoudnessOptions, frame_count, loudness_motion
@@ -35,6 +36,7 @@ class VideoOptions:
     motion: str = "loudness"  # a built-in source name or a track file (.npz)
     loudness: LoudnessOptions = field(default_factory=LoudnessOptions)  # the baseline's settings
     life: LifeOptions = field(default_factory=LifeOptions)  # blinks, idle head motion, breathing
+    expression: str = "neutral"  # a mood held through the clip (puppet.expression.EXPRESSIONS)
 
 
 def default_motion() -> str:
@@ -64,7 +66,8 @@ def make_motion(puppet: Puppet, audio_path: Path | None, options: VideoOptions) 
         else:
             speech = loudness_motion(samples, audio.ANALYSIS_RATE, rest, options.fps, options.loudness)
         activity = _activity(speech)
-        return speech + life_motion(len(speech), options.fps, rest, options.life, activity)
+        motion = speech + life_motion(len(speech), options.fps, rest, options.life, activity)
+        return replace(motion, offsets=motion.offsets + expression_offsets(rest, options.expression))
     landmarks, fps = track.read(options.motion)
     if abs(fps - options.fps) > 1e-6:
         raise PuppetError(f"{options.motion} is at {fps:g} fps; render it with --fps {fps:g}")

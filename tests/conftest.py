@@ -52,3 +52,26 @@ def drawn_face(centre=(256.0, 256.0), iod=100.0, tilt_degrees=0.0, mouth_gap=0.0
     unit = np.concatenate([jaw, brow, brow[::-1] * (-1, 1), nose, eye, eye[[3, 2, 1, 0, 5, 4]] * (-1, 1), lips])
     c, s = np.cos(np.radians(tilt_degrees)), np.sin(np.radians(tilt_degrees))
     return with_depth(unit @ np.array([[c, s], [-s, c]]) * iod + np.asarray(centre))
+
+
+@pytest.fixture(scope="session")
+def xvfb():
+    """A virtual X display for window tests: its DISPLAY name (skips when Xvfb is not installed)."""
+    import shutil
+    import subprocess
+    import time
+
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed (apt install xvfb)")
+    for number in range(90, 130):
+        if not Path(f"/tmp/.X11-unix/X{number}").exists() and not Path(f"/tmp/.X{number}-lock").exists():
+            break
+    server = subprocess.Popen(["Xvfb", f":{number}", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    for _ in range(100):
+        if Path(f"/tmp/.X11-unix/X{number}").exists():
+            break
+        time.sleep(0.05)
+    yield f":{number}"
+    server.terminate()
+    server.wait()

@@ -1,0 +1,212 @@
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from puppet import audio, features, live, settings
+from puppet.capture import Chunk
+from puppet.landmarks import face_scale
+from puppet.lipsync import shipped_predictor
+from puppet.live import Controls, LipSync, LiveOptions, LivePuppet, Stats, VoiceGate
+from puppet.settings import LiveSettings
+from puppet.window import Event, Offscreen
+
+RATE = features.SAMPLE_RATE
+BLOCK = 80  # 5 ms, as the microphone delivers it
+
+
+def tone(seconds, level=0.1, hz=220.0):
+    t = np.arange(int(seconds * RATE)) / RATE
+    return (level * np.sin(2 * np.pi * hz * t)).astype(np.float32)
+
+
+def blocks(samples, start=100.0):
+    """(chunk, capture time of its last sample) as a microphone would hand them over."""
+    for begin in range(0, len(samples), BLOCK):
+        piece = samples[begin : begin + BLOCK]
+        yield Chunk(piece, start + (begin + len(piece) - 1) / RATE, 0), start + (begin + len(piece)) / RATE
+
+
+def lip_gap(positions, rest):
+    """Inner-lip opening (62 to 66) in inter-ocular distances."""
+    return float(np.linalg.norm(positions[66] - positions[62]) / face_scale(rest))
+
+
+@pytest.fixture(scope="module")
+def speech():
+    from puppet.bundle import demo_files
+
+    return audio.load(demo_files()[2])
+
+
+def test_the_gate_passes_voice_holds_over_pauses_and_silences_noise_and_mute():
+    gate = VoiceGate(LiveSettings(gate_db=-40.0))
+    loud = gate(tone(0.2, 0.1), True)
+    assert np.abs(loud[-800:]).max() > 0.09
+    hold = gate(tone(0.1, 0.001), True)  # -60 dB right after speech: still open (word endings)
+    assert np.abs(hold[-400:]).max() > 0.0009
+    later = gate(tone(0.5, 0.001), True)  # after the hold the gate closes
+    assert np.abs(later[-800:]).max() < 1e-5
+    muted = gate(tone(0.3, 0.1), False)
+    assert np.abs(muted[-800:]).max() < 1e-5
+
+
+def test_sensitivity_is_a_gain_in_decibels():
+    plain = VoiceGate(LiveSettings(gate_db=-90.0))(tone(0.3), True)
+    louder = VoiceGate(LiveSettings(gate_db=-90.0, sensitivity_db=6.0))(tone(0.3), True)
+    assert np.abs(louder[-1000:]).max() / np.abs(plain[-1000:]).max() == pytest.approx(10 ** (6 / 20), rel=1e-3)
+
+
+def test_speech_frames_are_stamped_with_the_moment_they_depict(speech, demo):
+    lips = LipSync(shipped_predictor(), demo.rig.landmarks)
+    for chunk, now in blocks(speech[: 2 * RATE]):
+        lips.hear(chunk.samples, chunk.end_time)
+        delay = lips.delay(now)
+    step = features.FRAMES_PER_MOTION * features.HOP
+    first = lips.emitted - len(lips.times)
+    expected = 100.0 + (step * np.arange(first, lips.emitted) + step // 2) / RATE
+    np.testing.assert_allclose(list(lips.times), expected, atol=1e-9)
+    lookahead = live.lookahead_seconds(shipped_predictor())
+    assert lookahead == pytest.approx(0.0725)
+    assert lookahead <= delay <= lookahead + 0.03  # frames come every 20 ms, audio every 5
+
+
+def test_the_mouth_moves_with_speech_and_rests_in_silence(speech, demo):
+    puppet = LivePuppet(demo, LiveSettings(blink_rate=0.0), shipped_predictor())
+    rest = demo.rig.landmarks
+    clip = np.concatenate([speech[: 3 * RATE], np.zeros(RATE, np.float32)])
+    gaps = []
+    for chunk, now in blocks(clip, start=puppet.start):
+        puppet.hear(chunk, True)
+        gaps.append(lip_gap(puppet.pose(now)[0], rest))
+    gaps = np.asarray(gaps)
+    talking, silent = gaps[RATE // BLOCK // 2 : 3 * RATE // BLOCK], gaps[-RATE // BLOCK // 2 :]
+    rest_gap = lip_gap(rest, rest)
+    assert talking.max() > rest_gap + 0.15
+    assert np.abs(silent - rest_gap).max() < 0.03
+    puppet.close()
+
+
+def test_muted_voice_leaves_the_mouth_at_rest(speech, demo):
+    puppet = LivePuppet(demo, LiveSettings(blink_rate=0.0), shipped_predictor())
+    rest = demo.rig.landmarks
+    gaps = []
+    for chunk, now in blocks(speech[: 2 * RATE], start=puppet.start):
+        puppet.hear(chunk, False)
+        gaps.append(lip_gap(puppet.pose(now)[0], rest))
+    assert np.abs(np.asarray(gaps) - lip_gap(rest, rest)).max() < 0.03
+    puppet.close()
+
+
+def test_a_hotkey_changes_the_expression(demo):
+    controls = Controls(LiveSettings())
+    puppet = LivePuppet(demo, controls.settings, shipped_predictor())
+    before = puppet.pose(puppet.start + 0.5)[0]
+    assert controls.handle(Event("key", "2"))
+    assert controls.settings.expression == "happy"
+    puppet.apply(controls.settings)
+    after = puppet.pose(puppet.start + 1.5)[0]
+    corners = [48, 54]
+    assert (before[corners, 1] - after[corners, 1]).mean() > 0.03 * face_scale(demo.rig.landmarks)  # corners rose
+    puppet.close()
+
+
+def test_controls_mute_push_to_talk_and_steps():
+    controls = Controls(LiveSettings())
+    assert controls.talking
+    controls.handle(Event("key", "m"))
+    assert not controls.talking
+    controls.handle(Event("key", "m"))
+    assert controls.handle(Event("key", "t")) and not controls.talking
+    controls.handle(Event("key", "space"))
+    assert controls.talking
+    controls.handle(Event("release", "space"))
+    assert not controls.talking
+    controls.handle(Event("key", "="))
+    controls.handle(Event("key", "]"))
+    assert controls.settings.sensitivity_db == live.SENSITIVITY_STEP and controls.settings.gate_db == -50 + live.GATE_STEP
+    controls.handle(Event("key", "h"))
+    assert any("push-to-talk" in line for line in controls.lines(None, Stats(60.0), -30.0))
+    controls.handle(Event("key", "escape"))
+    assert controls.quit
+
+
+def test_stats_count_fps_latency_and_dropped_frames():
+    stats = Stats(30.0)
+    times = list(np.arange(60) / 30.0)
+    del times[30:32]  # two frames missed
+    for t in times:
+        stats.add(t, 0.08 + 0.01 * (t > 0.9), 0.004)
+    summary = stats.summary()
+    assert summary["dropped_frames"] == 2
+    assert summary["fps"] == pytest.approx(57 / (59 / 30), rel=1e-3)
+    assert summary["latency_ms_p50"] == pytest.approx(90, abs=0.1) and summary["latency_ms_p95"] == pytest.approx(90, abs=0.1)
+    assert summary["obs_audio_delay_ms"] in (80, 90)
+
+
+def test_the_loop_renders_at_the_target_rate_with_bounded_latency(gl, demo, demo_speech, tmp_path):
+    from fake_devices import register_fake_camera
+
+    from puppet.camera import VirtualCamera
+    from puppet.capture import FilePlayer
+
+    backend = register_fake_camera()
+    camera = VirtualCamera((128, 160), 30.0, (0, 177, 64), backend="fake")
+    display = Offscreen(gl, (160, 200))
+    source = FilePlayer(demo_speech, playback=False)
+    path = tmp_path / "live.json"
+    display.events.append(Event("key", "3"))  # angry: saved with the puppet
+    stats = live.run(demo, source, display, LiveOptions(size=(128, 160), fps=30.0, duration=2.5), LiveSettings(), camera, path)
+    camera.close()
+    summary = stats.summary()
+    assert 26 <= summary["fps"] <= 31
+    assert summary["dropped_frames"] <= 3
+    lookahead_ms = 1000 * live.lookahead_seconds(shipped_predictor())
+    assert lookahead_ms < summary["latency_ms_p50"] <= summary["latency_ms_p95"] < 140
+    assert settings.load(path).expression == "angry"
+    sent = backend.instances[-1]
+    assert sent.frames >= 60 and sent.last_frame.shape == (160, 128, 3)
+    assert tuple(sent.last_frame[0, 0]) == (0, 177, 64)  # the key colour where the portrait is transparent
+    assert np.abs(display.canvas.read()[..., 3].astype(int)).max() == 255  # the puppet was drawn
+
+
+def run_cli(*args, env=None):
+    return subprocess.run([sys.executable, "-m", "puppet", *args], capture_output=True, text=True, env=env, timeout=120)
+
+
+def test_live_in_a_window_writes_sane_stats(xvfb, demo_speech, tmp_path):
+    env = dict(os.environ, DISPLAY=xvfb)
+    stats = tmp_path / "stats.json"
+    result = run_cli("live", "--demo", "--audio", str(demo_speech), "--no-playback", "--duration", "3", "--fps", "30",
+                     "--size", "320", "--stats", str(stats), "--show-stats", env=env)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(stats.read_text())
+    for key in ("fps", "latency_ms_p50", "latency_ms_p95", "dropped_frames"):
+        assert math.isfinite(summary[key]), key
+    assert 25 <= summary["fps"] <= 31 and summary["dropped_frames"] <= 5
+    assert 60 < summary["latency_ms_p50"] <= summary["latency_ms_p95"] < 150
+    again = run_cli("live", "--demo", "--audio", str(demo_speech), "--duration", "1", "--stats", str(stats), env=env)
+    assert again.returncode == 2 and "--force" in again.stderr and len(again.stderr.strip().splitlines()) == 1
+
+
+def test_live_refuses_bad_input_with_one_line(tmp_path):
+    for args in (["live"], ["live", "--demo", "--audio", str(tmp_path / "missing.wav"), "--no-window"],
+                 ["live", "--demo", "--loop"], ["live", str(tmp_path / "nope.png")]):
+        result = run_cli(*args)
+        assert result.returncode == 2, (args, result.stderr)
+        assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
+
+
+def test_no_virtual_camera_says_what_to_install(demo_speech):
+    result = run_cli("live", "--demo", "--audio", str(demo_speech), "--no-window", "--virtual-camera", "--duration", "1")
+    assert result.returncode == 2
+    assert "v4l2loopback" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_list_devices_runs_without_any_device():
+    result = run_cli("live", "--list-devices")
+    assert result.returncode in (0, 2) and "Traceback" not in result.stderr
