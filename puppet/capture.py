@@ -153,7 +153,7 @@ def list_devices(backend=None) -> str:
     backend = backend if backend is not None else load_sounddevice()
     inputs = _inputs(backend)
     if not inputs:
-        return "no audio input devices found: plug in a microphone, or give `puppet live` an audio file"
+        return "no audio input devices found: plug in a microphone, or drive the puppet from a recording with --audio FILE"
     default = backend.default.device[0]
     width = max(len(info["name"]) for _, info in inputs)
     lines = ["audio input devices (* = default):"]
@@ -178,7 +178,7 @@ def _find_input(backend, device: int | str | None) -> tuple[int, dict]:
     (an exact name wins, else the first match), or None for the system default. PuppetError if none."""
     inputs = _inputs(backend)
     if not inputs:
-        raise PuppetError("no audio input devices found: plug in a microphone, or give `puppet live` an audio file")
+        raise PuppetError("no audio input devices found: plug in a microphone, or drive the puppet from a recording with --audio FILE")
     if device is None:
         default = backend.default.device[0]
         return next(((i, info) for i, info in inputs if i == default), inputs[0])

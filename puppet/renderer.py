@@ -65,6 +65,7 @@ class PuppetRenderer:
         self.offset_buffer = ctx.buffer(reserve=self.rest.nbytes, dynamic=True)
         self.mouth_buffer = ctx.buffer(rig.mouth_coords.tobytes())
         self.paint_mouth = rig.mouth_style.interior == "cavity"
+        self.index_buffers = []
         skin = np.delete(rig.triangles, rig.mouth, axis=0) if self.paint_mouth else rig.triangles
         self.skin = self._vertex_array(self.skin_program, skin)
         self.mouth = self._vertex_array(self.mouth_program, rig.triangles[rig.mouth])
@@ -77,8 +78,15 @@ class PuppetRenderer:
         self.mouth_program["u_tongue"].value = tuple(style.tongue)
         self.target_size = None
 
+    def release(self) -> None:
+        """Free this puppet's GL objects (the context lives on)."""
+        for resource in (self.skin, self.mouth, *self.index_buffers, self.rest_buffer, self.offset_buffer,
+                         self.mouth_buffer, self.texture, self.skin_program, self.mouth_program):
+            resource.release()
+
     def _vertex_array(self, program: moderngl.Program, triangles: np.ndarray) -> moderngl.VertexArray:
         index = self.ctx.buffer(np.ascontiguousarray(triangles, dtype=np.int32).tobytes())
+        self.index_buffers.append(index)
         buffers = [(self.rest_buffer, "2f", "in_rest"), (self.offset_buffer, "2f", "in_offset")]
         if "in_mouth" in program:
             buffers.append((self.mouth_buffer, "3f", "in_mouth"))

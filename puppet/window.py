@@ -29,8 +29,8 @@ SPECIAL_KEYS = {
 @dataclass(frozen=True)
 class Event:
     """One input event. kind: "key" (pressed or repeated), "release", "press"/"drag"/"up" (mouse
-    button 1, at x, y in target pixels), "resize". key: lower-case key name ("h", "1", "space",
-    "escape"); ctrl/shift: modifiers held."""
+    button 1, at x, y in target pixels), "move" (the mouse, no button held). key: lower-case key
+    name ("h", "1", "space", "escape"); ctrl/shift: modifiers held."""
 
     kind: str
     key: str = ""
@@ -85,9 +85,9 @@ class Window:
 
     def begin(self, background: Background) -> None:
         """Bind the window's framebuffer and clear it to the (premultiplied) background."""
-        self.ctx.screen.use()
         width, height = self.size
-        self.ctx.viewport = (0, 0, width, height)
+        self.ctx.screen.viewport = (0, 0, width, height)  # follows resizes
+        self.ctx.screen.use()
         r, g, b, a = background.rgba
         self.ctx.screen.clear(r * a, g * a, b * a, a)
 
@@ -127,12 +127,12 @@ class Window:
             return
         x, y = self._to_pixels(*glfw.get_cursor_pos(handle))
         self._dragging = action == glfw.PRESS
-        self.events.append(Event("press" if action == glfw.PRESS else "up", x=x, y=y))
+        kind = "press" if action == glfw.PRESS else "up"
+        self.events.append(Event(kind, x=x, y=y, ctrl=bool(mods & glfw.MOD_CONTROL), shift=bool(mods & glfw.MOD_SHIFT)))
 
     def _on_cursor(self, handle, x, y):
-        if self._dragging:
-            x, y = self._to_pixels(x, y)
-            self.events.append(Event("drag", x=x, y=y))
+        x, y = self._to_pixels(x, y)
+        self.events.append(Event("drag" if self._dragging else "move", x=x, y=y))
 
 
 class Offscreen:
@@ -185,6 +185,11 @@ class TextOverlay:
         self.quad = ctx.vertex_array(self.program, [(ctx.buffer(corners.tobytes()), "2f", "in_corner")])
         self.texture = None
         self.lines: list[str] = []
+
+    def release(self) -> None:
+        for resource in (self.texture, self.quad, self.program):
+            if resource is not None:
+                resource.release()
 
     def draw(self, lines: list[str], target_size: tuple[int, int]) -> None:
         """Draw `lines` over whatever is in the bound framebuffer of target_size (width, height)."""

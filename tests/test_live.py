@@ -3,6 +3,7 @@ import math
 import os
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -175,7 +176,7 @@ def test_the_loop_renders_at_the_target_rate_with_bounded_latency(gl, demo, demo
 
 
 def run_cli(*args, env=None):
-    return subprocess.run([sys.executable, "-m", "puppet", *args], capture_output=True, text=True, env=env, timeout=120)
+    return subprocess.run([sys.executable, "-m", "puppet", *args], capture_output=True, text=True, env=env, timeout=120, check=False)
 
 
 def test_live_in_a_window_writes_sane_stats(xvfb, demo_speech, tmp_path):
@@ -210,3 +211,97 @@ def test_no_virtual_camera_says_what_to_install(demo_speech):
 def test_list_devices_runs_without_any_device():
     result = run_cli("live", "--list-devices")
     assert result.returncode in (0, 2) and "Traceback" not in result.stderr
+
+
+class ShrinkingOffscreen(Offscreen):
+    """An offscreen display that is 'minimized' (size 0) for a while, then restored larger."""
+
+    def __init__(self, ctx, clock):
+        super().__init__(ctx, (120, 150))
+        self.clock = clock
+        self.seen = set()
+
+    @property
+    def size(self):
+        elapsed = time.perf_counter() - self.clock
+        size = (120, 150) if elapsed < 0.4 else (0, 0) if elapsed < 0.8 else (100, 120)
+        self.seen.add(size)
+        return size
+
+    @size.setter
+    def size(self, value):
+        pass
+
+
+def test_the_loop_survives_a_lost_microphone_and_a_minimized_window(gl, demo, monkeypatch):
+    import threading
+
+    from fake_devices import FakeSoundDevice
+
+    from puppet.capture import Microphone
+
+    monkeypatch.setattr(Microphone, "STALL_SECONDS", 0.1)
+    monkeypatch.setattr(Microphone, "RETRY_SECONDS", 0.1)
+    fake = FakeSoundDevice(signal=tone(1.0, 0.2))
+    mic = Microphone(backend=fake)
+    statuses = []
+    threading.Timer(0.3, fake.unplug).start()
+    threading.Timer(0.8, fake.replug).start()
+    display = ShrinkingOffscreen(gl, time.perf_counter())
+    original = Controls.lines
+
+    def spy(self, status, stats, level):
+        statuses.append(status)
+        return original(self, status, stats, level)
+
+    monkeypatch.setattr(Controls, "lines", spy)
+    stats = live.run(demo, mic, display, LiveOptions(size=(100, 120), fps=30.0, duration=1.6), LiveSettings())
+    assert any(s and s.startswith("microphone lost") for s in statuses)
+    assert statuses[-1] is None  # found again
+    assert {(0, 0), (100, 120)} <= display.seen
+    assert stats.frames > 20 and stats.summary()["latency_ms_p95"] < 400
+
+
+WINDOW_SCRIPT = """
+import sys
+from pathlib import Path
+
+import glfw
+import numpy as np
+
+from puppet import bundle, live, settings
+from puppet.capture import FilePlayer
+from puppet.live import LiveOptions
+from puppet.renderer import Background, PuppetRenderer
+from puppet.settings import LiveSettings
+from puppet.window import Event, Window
+
+image, landmarks, speech = bundle.demo_files()
+demo = bundle.load(image, landmarks)
+window = Window("test", (200, 240))
+renderer = PuppetRenderer(window.ctx, demo.image, demo.rig)
+glfw.set_window_size(window.handle, 160, 180)
+glfw.poll_events()
+assert window.size == (160, 180), window.size
+window.begin(Background((0, 0, 0, 1)))
+renderer.draw(demo.rig.vertices[:, :2], window.size)
+pixels = np.frombuffer(window.ctx.screen.read(viewport=(0, 0, 160, 180), components=3), np.uint8)
+assert pixels.max() > 200, "nothing drawn at the new size"
+window.present()
+window.events += [Event("key", "4"), Event("key", "f")]
+path = Path(sys.argv[1])
+stats = live.run(demo, FilePlayer(speech, playback=False), window, LiveOptions(size=(160, 180), fps=30.0, duration=1.0), LiveSettings(), None, path)
+window.close()
+assert stats.frames > 20, stats.frames
+saved = settings.load(path)
+assert saved.expression == "surprised" and saved.show_stats, saved
+print("ok")
+"""
+
+
+def test_a_real_window_takes_hotkeys_and_resizes(xvfb, tmp_path):
+    # Its own process: a GLX window cannot share a process with the tests' EGL context.
+    env = dict(os.environ, DISPLAY=xvfb)
+    result = subprocess.run([sys.executable, "-c", WINDOW_SCRIPT, str(tmp_path / "live.json")],
+                            capture_output=True, text=True, env=env, timeout=120, check=False)
+    assert result.returncode == 0 and result.stdout.strip() == "ok", result.stderr
