@@ -4,12 +4,15 @@ Render figures are frames per second of draw + MSAA resolve + readback of the de
 motion; the floor is one textured quad through the very same canvas in the same context, so
 the ratio shows what the mesh and shaders cost over the unavoidable minimum. Export is a
 whole `render` of a 30 s clip (decode, motion, render, H.264 + AAC encode) as a multiple of
-real time.
+real time. Live is the `puppet live` loop, offscreen at 512×512 and 60 fps, fed the demo clip on
+repeat as a microphone would feed it: frame rate, latency from the voice's capture to the frame
+presented, dropped frames. `--soak MINUTES` runs only the live loop, for long, and samples memory.
 """
 import json
 import os
 import platform
 import tempfile
+import threading
 import time
 import wave
 from pathlib import Path
@@ -31,6 +34,9 @@ from puppet.renderer import (
 SIZES = {"512": (512, 512), "1080": (1920, 1080)}
 EXPORT_SIZE = (512, 512)
 EXPORT_RUNS = 2  # the export figure is the faster of this many whole renders
+LIVE_SIZE = (512, 512)  # the demo's live window
+LIVE_FPS = 60.0  # a common display rate
+SOAK_SAMPLE = 10.0  # seconds between memory samples in a soak
 
 
 class FloorQuad:
@@ -157,7 +163,79 @@ def measure_predictor(seconds: float) -> dict:
     }
 
 
-def main(as_json: bool, seconds: float, clip_seconds: float) -> int:
+def measure_live(seconds: float, size: tuple[int, int] = LIVE_SIZE, fps: float = LIVE_FPS) -> dict:
+    """The live loop, offscreen, driven by the demo clip on repeat as if from a microphone:
+    live_fps, live_latency_ms_p50/p95 (voice capture → frame presented), live_dropped_frames."""
+    from puppet import capture, live
+    from puppet.settings import LiveSettings
+    from puppet.window import Offscreen
+
+    if not lipsync_available():
+        return {}
+    image, landmarks, speech = bundle.demo_files()
+    puppet = bundle.load(image, landmarks)
+    display = Offscreen(headless_context(), size, owns_context=True)
+    try:
+        source = capture.FilePlayer(speech, playback=False, loop=True)
+        stats = live.run(puppet, source, display, live.LiveOptions(size=size, fps=fps, duration=seconds), LiveSettings())
+    finally:
+        display.close()
+    summary = stats.summary()
+    return {
+        "live_fps": summary["fps"],
+        "live_latency_ms_p50": summary["latency_ms_p50"],
+        "live_latency_ms_p95": summary["latency_ms_p95"],
+        "live_dropped_frames": summary["dropped_frames"],
+        "live_frame_work_ms_p95": summary["frame_work_ms_p95"],
+    }
+
+
+def soak(minutes: float) -> dict:
+    """The live loop for `minutes` (as `measure_live`), with the process's resident memory sampled
+    every SOAK_SAMPLE seconds: it should stay flat."""
+    samples: list[float] = []
+    done = threading.Event()
+
+    def sample():
+        while not done.wait(SOAK_SAMPLE):
+            samples.append(_rss_mb())
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    sampler.start()
+    figures = measure_live(minutes * 60)
+    done.set()
+    sampler.join()
+    per_minute = max(1, round(60 / SOAK_SAMPLE))
+    return figures | {
+        "soak_minutes": minutes,
+        "rss_mb_first_minute": round(max(samples[:per_minute]), 1) if samples else None,
+        "rss_mb_last_minute": round(max(samples[-per_minute:]), 1) if samples else None,
+        "rss_mb_max": round(max(samples), 1) if samples else None,
+    }
+
+
+def _rss_mb() -> float:
+    """This process's resident memory in MB (Linux /proc; elsewhere the peak from getrusage)."""
+    try:
+        pages = int(Path("/proc/self/statm").read_text().split()[1])
+        return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
+    except (OSError, ValueError, IndexError):
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
+
+
+def lipsync_available() -> bool:
+    from puppet import lipsync
+
+    return lipsync.has_model()
+
+
+def main(as_json: bool, seconds: float, clip_seconds: float, soak_minutes: float | None = None) -> int:
+    if soak_minutes is not None:
+        figures = soak(soak_minutes)
+        print(json.dumps(figures) if as_json else "\n".join(f"{key:<28}{value:>10}" for key, value in figures.items()))
+        return 0
     image, landmarks, _ = bundle.demo_files()
     puppet = bundle.load(image, landmarks)
     ctx = headless_context()
@@ -167,6 +245,7 @@ def main(as_json: bool, seconds: float, clip_seconds: float) -> int:
     figures.update(measure_render(puppet, seconds))
     figures.update(measure_export(puppet, clip_seconds))
     figures.update(measure_predictor(seconds))
+    figures.update(measure_live(2 * seconds))
     if as_json:
         print(json.dumps(figures))
         return 0

@@ -123,6 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
     live.add_argument("--sensitivity", type=float, help="voice gain in dB (keys + and -); saved with the puppet")
     live.add_argument("--gate", type=float, help="noise gate in dBFS: quieter sound counts as silence (keys [ and ]); saved with the puppet")
     live.add_argument("--blink-rate", type=float, help="blinks per minute (keys , and .); saved with the puppet")
+    live.add_argument("--blink-randomness", type=float, help="spread of the gaps between blinks, 0 (metronome) to 2 (default 0.5); saved with the puppet")
     live.add_argument("--push-to-talk", action="store_true", help="the mouth moves only while Space is held (key T toggles)")
     live.add_argument("--show-stats", action="store_true", help="show fps and latency in the window (key F toggles)")
     live.add_argument("--duration", type=float, help="stop after this many seconds")
@@ -175,6 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print the figures as one JSON object")
     bench.add_argument("--seconds", type=float, default=3.0, help="time spent on each render measurement (default 3)")
     bench.add_argument("--clip", type=float, default=30.0, help="length of the export clip in seconds (default 30)")
+    bench.add_argument("--soak", type=float, metavar="MINUTES", help="instead: run the live loop this long and report its memory (flat is good) and latency")
     return parser
 
 
@@ -217,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
     if args.command == "bench":
         from puppet.bench import main as bench_main
 
-        return bench_main(args.json, args.seconds, args.clip)
+        return bench_main(args.json, args.seconds, args.clip, args.soak)
 
     from puppet import video
 
@@ -359,7 +361,8 @@ def _live(args: argparse.Namespace, points) -> int:
         puppet, source_path = bundle.load(args.input, args.landmarks, points), args.input
     path = settings.settings_path(source_path, puppet.name)
     chosen = settings.load(path)
-    overrides = {"expression": args.expression, "sensitivity_db": args.sensitivity, "gate_db": args.gate, "blink_rate": args.blink_rate}
+    overrides = {"expression": args.expression, "sensitivity_db": args.sensitivity, "gate_db": args.gate, "blink_rate": args.blink_rate,
+                 "blink_randomness": args.blink_randomness}
     chosen = replace(chosen, **{k: v for k, v in overrides.items() if v is not None})
     chosen = replace(chosen, push_to_talk=chosen.push_to_talk or args.push_to_talk, show_stats=chosen.show_stats or args.show_stats).clamped()
 

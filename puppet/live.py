@@ -480,10 +480,12 @@ def run(puppet: Puppet, source: AudioSource, display, options: LiveOptions, sett
             presented = display.present()
             if min(size) > 0 and not math.isnan(moment):
                 stats.add(presented, presented - moment, presented - now)
-            deadline = max(deadline + period, presented - period)  # after a stall, pace from now on
+            deadline = max(deadline + period, presented)  # late: start the next frame now, never a burst to catch up
             pause = deadline - time.perf_counter()
             if pause > 0:
                 time.sleep(pause)
+    except KeyboardInterrupt:  # Ctrl-C in the terminal ends the session like Esc: stats are still written
+        pass
     finally:
         source.close()
         live.close()

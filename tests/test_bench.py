@@ -8,3 +8,4 @@ def test_bench_reports_every_figure(capsys):
     figures = json.loads(capsys.readouterr().out)
     for key in ["render_fps_512", "floor_fps_512", "render_fps_1080", "floor_fps_1080", "export_realtime_x_512"]:
         assert figures[key] > 0, key
+    assert 0 < figures["live_fps"] <= 66 and 0 < figures["live_latency_ms_p50"] <= figures["live_latency_ms_p95"]

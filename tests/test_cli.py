@@ -137,7 +137,7 @@ def test_help_lists_the_commands(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     out = capsys.readouterr().out
-    assert "render" in out and "rig" in out and "bench" in out
+    assert "render" in out and "rig" in out and "bench" in out and "live" in out
 
 
 @pytest.mark.skipif(not __import__("puppet.lipsync").lipsync.has_model(), reason="no trained model")
@@ -153,3 +153,11 @@ def test_predict_writes_a_track_that_render_plays(files, capsys, demo, demo_spee
     assert np.abs(landmarks[0, :, :2] - demo.rig.landmarks[:, :2]).max() < 0.3 * 92  # the face's own landmarks, in motion
     video = files["dir"] / "from_track.mp4"
     assert main(["render", str(files["image"]), str(demo_speech), "--landmarks", str(files["landmarks"]), "--motion", str(out), "-o", str(video), "-q", "--size", "96"]) == 0
+
+
+def test_live_help_names_the_keys_to_obs_and_the_devices(capsys):
+    with pytest.raises(SystemExit):
+        main(["live", "--help"])
+    out = capsys.readouterr().out
+    for words in ("--virtual-camera", "--list-devices", "--audio", "--stats", "OBS"):
+        assert words in out, words

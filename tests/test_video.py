@@ -70,3 +70,14 @@ def test_a_track_of_another_face_is_refused(tmp_path, demo, demo_speech):
     with pytest.raises(PuppetError, match="another face"):
         video.render(demo, demo_speech, tmp_path / "x.mp4", options, progress=False)
     assert not (tmp_path / "x.mp4").exists()
+
+
+def test_an_expression_is_held_through_the_clip(demo, demo_speech):
+    from dataclasses import replace
+
+    from puppet.expression import expression_offsets
+
+    neutral = video.VideoOptions(motion="loudness")
+    plain = video.make_motion(demo, demo_speech, neutral)
+    happy = video.make_motion(demo, demo_speech, replace(neutral, expression="happy"))
+    np.testing.assert_allclose(happy.offsets - plain.offsets, np.broadcast_to(expression_offsets(demo.rig.landmarks, "happy"), plain.offsets.shape), atol=1e-4)
