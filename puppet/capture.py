@@ -200,7 +200,8 @@ class Microphone(AudioSource):
     """A PortAudio input device, reopened by itself when it is lost (unplugged, taken, stalled)."""
 
     RETRY_SECONDS = 2.0  # between attempts to reopen a lost device
-    STALL_SECONDS = 0.5  # a started stream without a callback for this long is lost
+    STALL_SECONDS = 0.5  # a running stream without a callback for this long is lost
+    START_SECONDS = 3.0  # a new stream may take this long to deliver its first block (PulseAudio's ALSA plugin can take 2 s)
 
     def __init__(self, device: int | str | None = None, backend=None, ring_seconds: float = RING_SECONDS):
         """device: index or part of the name of an input device (see `list_devices`), None for the
@@ -247,8 +248,9 @@ class Microphone(AudioSource):
             def callback(indata, frames, time_info, status):
                 ring.write(indata[:, 0], time.perf_counter())
 
+            # latency="low": the host's small buffers (PulseAudio otherwise delivers in 20 ms bursts, 10 ms later on average)
             stream = self.backend.InputStream(samplerate=rate, blocksize=round(rate * BLOCK_SECONDS), device=index,
-                                              channels=1, dtype="float32", callback=callback)
+                                              channels=1, dtype="float32", callback=callback, latency="low")
             stream.start()
         except PuppetError:
             self._lose("not connected")
@@ -269,10 +271,10 @@ class Microphone(AudioSource):
                     self._open()
                 continue
             ring = self._pipe.ring
-            heard = ring.end_time if ring.written else self._opened_at
+            heard, patience = (ring.end_time, self.STALL_SECONDS) if ring.written else (self._opened_at, self.START_SECONDS)
             if not self._stream.active:
                 self._lose("the stream stopped")
-            elif now - heard > self.STALL_SECONDS:
+            elif now - heard > patience:
                 self._lose(f"no audio for {now - heard:.1f} s")
 
     def _lose(self, why: str) -> None:
