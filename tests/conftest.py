@@ -56,22 +56,32 @@ def drawn_face(centre=(256.0, 256.0), iod=100.0, tilt_degrees=0.0, mouth_gap=0.0
 
 @pytest.fixture(scope="session")
 def xvfb():
-    """A virtual X display for window tests: its DISPLAY name (skips when Xvfb is not installed)."""
+    """A virtual X display for window tests, its number chosen by Xvfb (-displayfd): the DISPLAY
+    name to give a subprocess (skips when Xvfb is not installed). Windows open in subprocesses:
+    GLX will not make a window current beside the tests' EGL context (BadAccess)."""
+    import os
     import shutil
     import subprocess
-    import time
 
     if shutil.which("Xvfb") is None:
         pytest.skip("Xvfb is not installed (apt install xvfb)")
-    for number in range(90, 130):
-        if not Path(f"/tmp/.X11-unix/X{number}").exists() and not Path(f"/tmp/.X{number}-lock").exists():
-            break
-    server = subprocess.Popen(["Xvfb", f":{number}", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    for _ in range(100):
-        if Path(f"/tmp/.X11-unix/X{number}").exists():
-            break
-        time.sleep(0.05)
-    yield f":{number}"
-    server.terminate()
-    server.wait()
+    read, write = os.pipe()
+    server = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+                              pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write)
+    try:
+        with os.fdopen(read) as pipe:
+            number = pipe.readline().strip()
+        if not number:
+            pytest.skip("Xvfb did not start")
+        yield f":{number}"
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+
+
+def x_env(display: str) -> dict:
+    """This process's environment pointed at an X display only (no Wayland), for a window subprocess."""
+    import os
+
+    return {key: value for key, value in os.environ.items() if key != "WAYLAND_DISPLAY"} | {"DISPLAY": display}

@@ -1,6 +1,4 @@
 import json
-import os
-import shutil
 import subprocess
 import sys
 import textwrap
@@ -9,6 +7,7 @@ import time
 import cv2
 import numpy as np
 import pytest
+from conftest import x_env
 
 from puppet import bundle, cli
 from puppet.editor import Editor, edit, preview_motion, window_size
@@ -238,28 +237,6 @@ def test_window_size_follows_the_portrait():
     assert window_size((800, 900)) == (800, 900)
 
 
-@pytest.fixture
-def x_display(monkeypatch):
-    """A virtual X display for a real window; its number is chosen by Xvfb (-displayfd)."""
-    if shutil.which("Xvfb") is None:
-        pytest.skip("Xvfb is not installed")
-    read, write = os.pipe()
-    server = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
-                              pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    os.close(write)
-    try:
-        with os.fdopen(read) as pipe:
-            number = pipe.readline().strip()
-        if not number:
-            pytest.skip("Xvfb did not start")
-        monkeypatch.setenv("DISPLAY", f":{number}")
-        monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-        yield f":{number}"
-    finally:
-        server.terminate()
-        server.wait(timeout=10)
-
-
 # The window test runs in its own interpreter: this one has the EGL test context current, and
 # GLX refuses to make a window's context current beside it (BadAccess).
 WINDOW_SCRIPT = textwrap.dedent("""
@@ -282,9 +259,11 @@ WINDOW_SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_a_real_window_edits_and_saves(x_display, demo, tmp_path):
+def test_a_real_window_edits_and_saves(xvfb, demo, tmp_path):
     output = tmp_path / "window.puppet"
-    result = subprocess.run([sys.executable, "-c", WINDOW_SCRIPT, str(output)], capture_output=True, text=True, timeout=60, check=False)
+    env = x_env(xvfb)
+    result = subprocess.run([sys.executable, "-c", WINDOW_SCRIPT, str(output)], capture_output=True, text=True,
+                            timeout=60, check=False, env=env)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == str(output)
     moved = bundle.load(output).rig.landmarks[LOWER_LIP, :2]

@@ -1,12 +1,12 @@
 import json
 import math
-import os
 import subprocess
 import sys
 import time
 
 import numpy as np
 import pytest
+from conftest import x_env
 
 from puppet import audio, features, live, settings
 from puppet.capture import Chunk
@@ -180,7 +180,7 @@ def run_cli(*args, env=None):
 
 
 def test_live_in_a_window_writes_sane_stats(xvfb, demo_speech, tmp_path):
-    env = dict(os.environ, DISPLAY=xvfb)
+    env = x_env(xvfb)
     stats = tmp_path / "stats.json"
     result = run_cli("live", "--demo", "--audio", str(demo_speech), "--no-playback", "--duration", "3", "--fps", "30",
                      "--size", "320", "--stats", str(stats), "--show-stats", env=env)
@@ -301,7 +301,7 @@ print("ok")
 
 def test_a_real_window_takes_hotkeys_and_resizes(xvfb, tmp_path):
     # Its own process: a GLX window cannot share a process with the tests' EGL context.
-    env = dict(os.environ, DISPLAY=xvfb)
+    env = x_env(xvfb)
     result = subprocess.run([sys.executable, "-c", WINDOW_SCRIPT, str(tmp_path / "live.json")],
                             capture_output=True, text=True, env=env, timeout=120, check=False)
     assert result.returncode == 0 and result.stdout.strip() == "ok", result.stderr
