@@ -16,6 +16,7 @@ MAX_EXTRAPOLATION past the newest frame is extrapolated from the last two. A fra
 the time it is presented minus the capture time of the voice it shows, which is the capture time
 of the newest audio sample that shaped it plus the lookahead.
 """
+import functools
 import json
 import math
 import time
@@ -85,15 +86,10 @@ def lookahead_seconds(predictor: Predictor) -> float:
     return (step * predictor.lookahead + features.WINDOW // 2) / features.SAMPLE_RATE
 
 
-_neutral_voice = None
-
-
+@functools.cache
 def neutral_voice() -> np.ndarray:
     """(256,) float32: the speaker embedding used until the live voice has been heard (the demo's)."""
-    global _neutral_voice
-    if _neutral_voice is None:
-        _neutral_voice = embed(audio.load(demo_files()[2]))
-    return _neutral_voice
+    return embed(audio.load(demo_files()[2]))
 
 
 class VoiceGate:
@@ -235,6 +231,7 @@ class LivePuppet:
         self.voice = VoiceLearner(self.lips.stream)
         self.expression = ExpressionBlend(self.rest, settings.expression)
         self.start = time.perf_counter()
+        self.life: Life | None = None
         self.apply(settings)
 
     def apply(self, settings: LiveSettings) -> None:
@@ -244,8 +241,7 @@ class LivePuppet:
         self.expression.choose(settings.expression)
         life = LifeOptions(blink_rate=settings.blink_rate, blink_randomness=settings.blink_randomness,
                            idle_degrees=settings.idle_degrees, seed=self.seed)
-        previous = getattr(self, "life", None)
-        self.life = Life(self.rest, life)
+        previous, self.life = self.life, Life(self.rest, life)
         if previous is not None:  # keep the sway's smoothing; blinks are rescheduled from now on
             self.life.activity, self.life.last_time = previous.activity, previous.last_time
 

@@ -48,6 +48,7 @@ LOOKAHEAD = 3  # motion frames of future audio: 60 ms, plus the STFT half-window
 class NetworkConfig:
     content_hidden: int = 256  # LSTM_c units per layer (paper: 256)
     content_layers: int = 3  # LSTM_c layers (paper: 3)
+    dropout: float = 0.0  # between LSTM_c layers, in training only (0: none, as the shipped model)
     content_mlp: tuple[int, ...] = (512, 256)  # MLP_c hidden sizes before the 204 outputs (paper: 512, 256)
     content_code: int = 64  # c̃: the content features handed to the speaker branch
     speaker_reduced: int = 128  # the speaker embedding after its one-layer MLP (paper: 256 → 128)
@@ -149,7 +150,7 @@ class Network(nn.Module):
         # Per-value log-mel statistics of the training corpus, set once by training (see set_feature_stats).
         self.register_buffer("feature_mean", torch.full((N_INPUT,), -2.5))
         self.register_buffer("feature_std", torch.full((N_INPUT,), 1.5))
-        self.content_lstm = nn.LSTM(N_INPUT, config.content_hidden, config.content_layers, batch_first=True)
+        self.content_lstm = nn.LSTM(N_INPUT, config.content_hidden, config.content_layers, batch_first=True, dropout=config.dropout)
         self.content_mlp = mlp([config.content_hidden, *config.content_mlp, N_OFFSETS])
         self.content_code = nn.Linear(config.content_hidden, config.content_code)
         self.speaker_reduce = nn.Sequential(nn.Linear(SPEAKER_DIM, config.speaker_reduced), nn.LeakyReLU(0.2))

@@ -76,6 +76,7 @@ class TrainConfig:
     device: str = "cpu"  # "cuda" to train on a GPU
     eval_utterances: int = 64  # held-out utterances evaluated at most
     export: bool = True  # write out/landmarks.onnx at the end, checked against torch
+    feature_augment: bool = False  # recolour, re-level and band-mask each training window's log-mels (see augment_steps)
     network: NetworkConfig = field(default_factory=NetworkConfig)  # ignored when resuming
 
 
@@ -166,12 +167,37 @@ def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: in
         u = utterances[index]
         start = int(rng.integers(0, max(1, len(u.offsets) - frames + 1)))
         n = min(frames, len(u.offsets) - start)
-        batch["steps"][b, : n + lookahead] = u.steps[start : start + n + lookahead]
+        window = u.steps[start : start + n + lookahead]
+        batch["steps"][b, : n + lookahead] = augment_steps(window, rng) if config.feature_augment else window
         batch["speaker"][b] = u.speaker
         batch["offsets"][b, :n] = u.offsets[start : start + n]
         batch["rotation"][b, :n] = u.rotation[start : start + n]
         batch["mask"][b, :n] = 1.0
     return {k: torch.from_numpy(v).to(config.device) for k, v in batch.items()}
+
+
+# Feature-domain augmentation, drawn afresh for every training window (log10 mel units; 1 = 10 dB of power).
+EQ_STD = 0.15  # each of EQ_TERMS cosine terms across the mel axis: a smooth microphone colouring of about ±5 dB
+EQ_TERMS = 3
+LEVEL_RANGE = 0.6  # uniform level change in ±this (±6 dB)
+MAX_BAND_MASKS = 2  # frequency bands replaced by the window's mean (SpecAugment's frequency masking)
+MAX_BAND_WIDTH = 8  # mel bins
+
+
+def augment_steps(steps: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(S, 160) float32 network steps (two 80-bin log-mel frames each) with one random colouring, level
+    change and up to MAX_BAND_MASKS masked bands applied to every frame; digital silence stays silence."""
+    mel = steps.reshape(len(steps), 2, features.N_MELS).copy()
+    silent = mel <= SILENCE + 1e-6
+    axis = np.linspace(0.0, 1.0, features.N_MELS)
+    colour = sum(rng.normal(0.0, EQ_STD) * np.cos(np.pi * (k + 1) * axis) for k in range(EQ_TERMS))
+    mel = np.maximum(mel + colour + rng.uniform(-LEVEL_RANGE, LEVEL_RANGE), SILENCE)
+    for _ in range(int(rng.integers(0, MAX_BAND_MASKS + 1))):
+        width = int(rng.integers(1, MAX_BAND_WIDTH + 1))
+        low = int(rng.integers(0, features.N_MELS - width))
+        mel[..., low : low + width] = mel[~silent].mean() if (~silent).any() else SILENCE
+    mel[silent] = SILENCE
+    return mel.reshape(steps.shape).astype(np.float32)
 
 
 def feature_stats(utterances: list[Utterance], lookahead: int) -> tuple[np.ndarray, np.ndarray]:
@@ -451,6 +477,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--eval-every", type=int, default=defaults.eval_every)
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every)
     parser.add_argument("--no-gan", action="store_true", help="train without the adversarial loss")
+    parser.add_argument("--feature-augment", action="store_true", help="recolour, re-level and band-mask each window's log-mels")
+    parser.add_argument("--dropout", type=float, default=0.0, help="dropout between the content LSTM's layers")
     parser.add_argument("--threads", type=int, default=defaults.threads)
     parser.add_argument("--device", default=defaults.device, help="torch device, e.g. cuda (default cpu)")
     return parser
@@ -461,6 +489,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         corpus=args.corpus, out=args.out, steps=args.steps, batch_size=args.batch_size,
         sequence_frames=args.sequence_frames, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
         checkpoint_every=args.checkpoint_every, gan=not args.no_gan, threads=args.threads, device=args.device,
+        feature_augment=args.feature_augment, network=NetworkConfig(dropout=args.dropout),
     )
 
 

@@ -139,3 +139,18 @@ def test_export_matches_torch(run, tmp_path):
     assert json.loads(meta["feature_spec"]) == json.loads(json.dumps(features.SPEC))
     assert meta["n_landmarks"] == "68" and meta["lookahead_frames"] == str(LOOKAHEAD) and float(meta["motion_fps"]) == 50
     assert json.loads(meta["training"])["steps"] == 30
+
+
+def test_feature_augmentation_recolours_windows_but_keeps_silence_and_shape():
+    from puppet.predictor import SILENCE
+    from puppet.train import augment_steps
+
+    rng = np.random.default_rng(0)
+    steps = rng.uniform(-4.0, -1.0, (50, 160)).astype(np.float32)
+    steps[40:] = SILENCE
+    first, second = augment_steps(steps, np.random.default_rng(1)), augment_steps(steps, np.random.default_rng(2))
+    assert first.shape == steps.shape and first.dtype == np.float32
+    assert np.all(first[40:] == SILENCE) and first.min() >= SILENCE
+    assert 0.05 < np.abs(first[:40] - steps[:40]).mean() < 1.5
+    assert not np.allclose(first, second)
+    np.testing.assert_array_equal(first, augment_steps(steps, np.random.default_rng(1)))
