@@ -68,6 +68,16 @@ def load(path: str | Path, landmarks: str | Path | None = None, points: np.ndarr
     return Puppet(image, build(points68, size), path.stem)
 
 
+def load_centred(path: str | Path) -> Puppet:
+    """A puppet from an image with the mean face placed in its middle (`template.centred`): the rig
+    editor's starting point when no face is found."""
+    from puppet.template import centred
+
+    image = load_image(path)
+    size = (image.shape[1], image.shape[0])
+    return Puppet(image, build(lm.clamp_to_image(centred(size), size), size), Path(path).stem)
+
+
 def load_bundle(folder: Path) -> Puppet:
     """A puppet from a bundle folder written by `save`."""
     rig_path = folder / RIG_FILE

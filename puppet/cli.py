@@ -5,7 +5,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from puppet.errors import PuppetError
+from puppet.errors import NoFaceError, PuppetError
 from puppet.template import POINTS_HELP
 
 EXPRESSION_NAMES = ("neutral", "happy", "angry", "surprised", "sad")  # puppet.expression.EXPRESSIONS, without importing numpy for --help
@@ -196,7 +196,13 @@ def run(args: argparse.Namespace) -> int:
         points = parse_points(args.points)
 
     if args.command == "rig":
-        puppet = bundle.load(args.image, args.landmarks, points)
+        try:
+            puppet = bundle.load(args.image, args.landmarks, points)
+        except NoFaceError:
+            if not args.edit:
+                raise
+            puppet = bundle.load_centred(args.image)
+            print("no face found: starting from a face placed in the middle; drag its points onto the face")
         output = args.output or (args.image if args.image.is_dir() else args.image.with_suffix(".puppet"))
         if args.edit:
             from puppet.editor import edit
@@ -205,7 +211,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"saved {folder}" if folder else "closed without saving")
             return 0
         folder = bundle.save(puppet, output, args.force)
-        print(f"rigged {args.image} -> {folder}  (check {folder / bundle.PREVIEW_FILE}; render with: puppet render {folder} SPEECH.wav -o out.mp4)")
+        print(f"rigged {args.image} -> {folder}  (check {folder / bundle.PREVIEW_FILE}; adjust with: puppet rig {folder} --edit; "
+              f"render with: puppet render {folder} SPEECH.wav -o out.mp4)")
         return 0
 
     if args.command == "live":

@@ -16,7 +16,7 @@ import cv2
 import dlib
 import numpy as np
 
-from puppet.errors import PuppetError
+from puppet.errors import NoFaceError, PuppetError
 from puppet.landmarks import N_LANDMARKS
 
 # HOG sees faces of about 80 px and up; it runs on a copy whose long side is at least
@@ -172,9 +172,9 @@ def detect(image: np.ndarray, source: str) -> np.ndarray:
         return _fit(rgb, box).astype(np.float32)
     box = _cnn_box(rgb)
     if box is None:
-        raise PuppetError(
+        raise NoFaceError(
             f"no face found in {source}; give its 68 landmarks with --landmarks FILE, "
-            f"or rig it by hand: puppet rig {source} --points ..."
+            f"or rig it by hand: puppet rig {source} --edit (or --points ...)"
         )
     # The CNN's boxes sit differently on the face than the HOG boxes the predictor was trained
     # on: fit once, then fit again in the box the predictor expects for those landmarks.

@@ -77,6 +77,18 @@ def control_points(face: np.ndarray) -> np.ndarray:
     return np.vstack([lm.eye_centres(face[:, :2]), face[[lm.NOSE_TIP, *lm.MOUTH_CORNERS], :2]])
 
 
+CENTRED_EYES = 0.22  # a face placed with no clues: eyes this share of the shorter side apart ...
+CENTRED_EYE_LINE = 0.42  # ... on a line this far down the image
+
+
+def centred(image_size: tuple[int, int]) -> np.ndarray:
+    """(68, 2) float32 landmarks, image pixels: the mean face in the middle of an image, upright, for
+    a portrait where no face was found (a starting point for the rig editor)."""
+    width, height = image_size
+    iod = CENTRED_EYES * min(width, height)
+    return (_load_mean_face() * iod + (width / 2, CENTRED_EYE_LINE * height)).astype(np.float32)
+
+
 def parse_points(texts: list[str]) -> np.ndarray:
     """(5, 2) float32 image pixels from 5 strings 'x,y' in `CONTROL_POINTS` order."""
     if len(texts) != len(CONTROL_POINTS):

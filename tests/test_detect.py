@@ -35,7 +35,7 @@ def test_no_face_raises_with_the_rigging_hint():
         detect(image, "noise.png")
     message = str(error.value)
     assert "no face found in noise.png" in message
-    assert "--landmarks FILE" in message and "puppet rig noise.png --points" in message
+    assert "--landmarks FILE" in message and "puppet rig noise.png --edit" in message and "--points" in message
 
 
 def test_wrong_image_layout_is_refused():

@@ -116,3 +116,16 @@ def test_a_face_cut_off_by_the_frame_still_fits():
     points = np.array([[20, 20], [60, 20], [40, 45], [25, 60], [55, 60]], dtype=np.float32)  # chin below the edge
     face = fit(points, SIZE)
     assert face[8, 1] > 60  # the chin continues the face; bundle.load clamps it into the image
+
+
+def test_a_centred_face_sits_upright_in_the_middle_and_rigs():
+    from puppet.landmarks import eye_centres
+    from puppet.rig import build
+    from puppet.template import CENTRED_EYES, centred
+
+    face = centred((400, 300))
+    eyes = eye_centres(face)
+    assert abs(np.linalg.norm(eyes[1] - eyes[0]) - CENTRED_EYES * 300) < 0.5
+    assert abs(eyes[:, 1] - eyes[:, 1].mean()).max() < 0.5 and abs(eyes[:, 0].mean() - 200) < 0.5
+    assert face.min() >= 0 and face[:, 0].max() <= 400 and face[:, 1].max() <= 300
+    build(face, (400, 300))
