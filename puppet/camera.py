@@ -75,6 +75,7 @@ class VirtualCamera:
             raise PuppetError(f"no virtual camera ({_brief(error)}): {_install_hint()}") from None
         used, name = self.camera.backend, self.camera.device
         self.name = name if used.lower() in name.lower() else f"{used} {name}"
+        self.fps = fps
         self.composite = KeyComposite(size, key)
 
     def send(self, frame: np.ndarray) -> None:

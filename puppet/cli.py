@@ -115,6 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     live.add_argument("--loop", action="store_true", help="with --audio: start the recording again at its end")
     live.add_argument("--virtual-camera", action="store_true", help="also send frames to the system virtual camera (OBS Virtual Camera, v4l2loopback), over the key colour")
     live.add_argument("--camera-device", help="the virtual camera device to use (e.g. /dev/video2)")
+    live.add_argument("--camera-fps", type=float, default=30.0, help="frames per second sent to the virtual camera (default 30)")
     live.add_argument("--background", type=parse_background, help="'transparent' (the default: a see-through window where the desktop allows, else the key colour) or a colour: green, blue, magenta, #rrggbb ...")
     live.add_argument("--size", type=parse_size, help="window and camera WIDTHxHEIGHT, or one number for the longer side (default: the portrait's shape, 720 tall at most)")
     live.add_argument("--fps", type=float, help="frames per second (default: the display's refresh rate)")
@@ -387,7 +388,7 @@ def _live(args: argparse.Namespace, points) -> int:
     if args.virtual_camera:
         from puppet.camera import VirtualCamera
 
-        camera = VirtualCamera(size, args.fps or 30.0, tuple(round(c * 255) for c in options.key), args.camera_device)
+        camera = VirtualCamera(size, args.camera_fps, tuple(round(c * 255) for c in options.key), args.camera_device)
     display = None
     try:
         display = _open_display(args.no_window, puppet.name, size, options)

@@ -444,7 +444,7 @@ def run(puppet: Puppet, source: AudioSource, display, options: LiveOptions, sett
     period = 1.0 / fps
     stats = Stats(fps)
     source.start()
-    start = deadline = time.perf_counter()
+    start = deadline = camera_due = time.perf_counter()
     ended_at = None
     try:
         while not (display.closing or controls.quit):
@@ -464,7 +464,8 @@ def run(puppet: Puppet, source: AudioSource, display, options: LiveOptions, sett
             stats.audio_dropped += chunk.dropped
             live.hear(chunk, controls.talking)
             positions, moment = live.pose(now)
-            if camera is not None:
+            if camera is not None and now >= camera_due:  # the camera's own rate, often below the display's
+                camera_due = max(camera_due + 1.0 / camera.fps, now)
                 camera_canvas.begin(key)
                 renderer.draw(positions, options.size)
                 camera.send(camera_canvas.read())

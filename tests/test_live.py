@@ -156,7 +156,7 @@ def test_the_loop_renders_at_the_target_rate_with_bounded_latency(gl, demo, demo
     from puppet.capture import FilePlayer
 
     backend = register_fake_camera()
-    camera = VirtualCamera((128, 160), 30.0, (0, 177, 64), backend="fake")
+    camera = VirtualCamera((128, 160), 15.0, (0, 177, 64), backend="fake")
     display = Offscreen(gl, (160, 200))
     source = FilePlayer(demo_speech, playback=False)
     path = tmp_path / "live.json"
@@ -170,7 +170,7 @@ def test_the_loop_renders_at_the_target_rate_with_bounded_latency(gl, demo, demo
     assert lookahead_ms < summary["latency_ms_p50"] <= summary["latency_ms_p95"] < 140
     assert settings.load(path).expression == "angry"
     sent = backend.instances[-1]
-    assert sent.frames >= 60 and sent.last_frame.shape == (160, 128, 3)
+    assert 30 <= sent.frames <= 40 and sent.last_frame.shape == (160, 128, 3)  # 2.5 s at the camera's 15 fps
     assert tuple(sent.last_frame[0, 0]) == (0, 177, 64)  # the key colour where the portrait is transparent
     assert np.abs(display.canvas.read()[..., 3].astype(int)).max() == 255  # the puppet was drawn
 
