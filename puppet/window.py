@@ -46,9 +46,9 @@ class Window:
     def __init__(self, title: str, size: tuple[int, int], transparent: bool = False):
         """size: (width, height) in screen units; transparent: ask for a see-through background
         (`self.transparent` says whether the platform granted it)."""
-        glfw.set_error_callback(None)
+        glfw.ERROR_REPORTING = "ignore"  # failures are reported below, as one line
         if not glfw.init():
-            raise PuppetError("cannot open a window: no display found (run it on a desktop, or use --no-window)")
+            raise PuppetError(f"cannot open a window ({_glfw_error()}): run it on a desktop, or use --no-window")
         glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 3)
         glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
         glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
@@ -57,7 +57,7 @@ class Window:
         self.handle = glfw.create_window(size[0], size[1], title, None, None)
         if not self.handle:
             glfw.terminate()
-            raise PuppetError("cannot open a window with OpenGL 3.3 on this display (update the graphics driver, or use --no-window)")
+            raise PuppetError(f"cannot open a window with OpenGL 3.3 on this display ({_glfw_error()}): update the graphics driver, or use --no-window")
         glfw.make_context_current(self.handle)
         glfw.swap_interval(1)
         self.ctx = moderngl.create_context()
@@ -133,6 +133,12 @@ class Window:
     def _on_cursor(self, handle, x, y):
         x, y = self._to_pixels(x, y)
         self.events.append(Event("drag" if self._dragging else "move", x=x, y=y))
+
+
+def _glfw_error() -> str:
+    """glfw's description of its last error."""
+    code, description = glfw.get_error()
+    return description.decode(errors="replace") if description else "no display found"
 
 
 class Offscreen:

@@ -305,3 +305,10 @@ def test_a_real_window_takes_hotkeys_and_resizes(xvfb, tmp_path):
     result = subprocess.run([sys.executable, "-c", WINDOW_SCRIPT, str(tmp_path / "live.json")],
                             capture_output=True, text=True, env=env, timeout=120, check=False)
     assert result.returncode == 0 and result.stdout.strip() == "ok", result.stderr
+
+
+def test_without_a_display_says_to_use_no_window(demo_speech):
+    env = {key: value for key, value in os.environ.items() if key not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    result = run_cli("live", "--demo", "--audio", str(demo_speech), "--duration", "1", env=env)
+    assert result.returncode == 2 and "--no-window" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
