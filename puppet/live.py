@@ -201,11 +201,11 @@ class VoiceLearner:
         self.job = None
 
     def hear(self, voice: np.ndarray) -> None:
-        """voice: (n,) float32 16 kHz gated samples; silence is not counted."""
+        """voice: (n,) float32 16 kHz samples heard above the noise gate."""
         if self.job is not None and self.job.done():
             self.stream.speaker = self.job.result()
             self.job = None
-        if not self.pending or not np.any(voice):
+        if not self.pending or len(voice) == 0:
             return
         self.heard.append(voice)
         self.seconds += len(voice) / features.SAMPLE_RATE
@@ -248,7 +248,8 @@ class LivePuppet:
     def hear(self, chunk: Chunk, talking: bool) -> None:
         """New audio from the source; `talking` is False while muted or push-to-talk is released."""
         voice = self.gate(chunk.samples, talking)
-        self.voice.hear(voice)
+        if talking and self.gate.level_db > self.settings.gate_db:  # only speech teaches who is speaking
+            self.voice.hear(voice)
         self.lips.hear(voice, chunk.end_time)
 
     def pose(self, now: float) -> tuple[np.ndarray, float]:

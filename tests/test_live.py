@@ -313,3 +313,18 @@ def test_without_a_display_says_to_use_no_window(demo_speech):
     result = run_cli("live", "--demo", "--audio", str(demo_speech), "--duration", "1", env=env)
     assert result.returncode == 2 and "--no-window" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_the_voice_is_learned_from_speech_not_from_silence(speech, demo):
+    puppet = LivePuppet(demo, LiveSettings(), shipped_predictor())
+    for chunk, _ in blocks(np.zeros(4 * RATE, np.float32), start=puppet.start):
+        puppet.hear(chunk, True)
+    assert puppet.voice.seconds == 0
+    for chunk, _ in blocks(speech[: 7 * RATE], start=puppet.start + 4):
+        puppet.hear(chunk, True)
+    assert live.VOICE_SECONDS[0] < puppet.voice.seconds <= 7.0
+    if puppet.voice.job is not None:
+        puppet.voice.job.result(timeout=30)
+    puppet.hear(Chunk(np.zeros(BLOCK, np.float32), puppet.start + 12, 0), True)
+    assert not np.allclose(puppet.lips.stream.speaker, live.neutral_voice())  # the stream now knows this voice
+    puppet.close()
