@@ -20,7 +20,7 @@ def wheel(tmp_path_factory):
 
 def test_wheel_contains_shaders_and_assets(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
-    for name in ["puppet/shaders/puppet.vert", "puppet/shaders/skin.frag", "puppet/shaders/mouth.frag",
+    for name in ["puppet/shaders/puppet.vert", "puppet/shaders/skin.frag", "puppet/shaders/mouth.frag", "puppet/shaders/overlay.vert",
                  "puppet/assets/mean_face.txt", "puppet/assets/demo/character.png",
                  "puppet/assets/demo/character_landmarks.txt", "puppet/assets/demo/speech.wav"]:
         assert name in names, name
