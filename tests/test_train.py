@@ -154,3 +154,20 @@ def test_feature_augmentation_recolours_windows_but_keeps_silence_and_shape():
     assert 0.05 < np.abs(first[:40] - steps[:40]).mean() < 1.5
     assert not np.allclose(first, second)
     np.testing.assert_array_equal(first, augment_steps(steps, np.random.default_rng(1)))
+
+
+def test_a_silence_tail_silences_the_audio_and_brings_the_mouth_to_rest():
+    from puppet.predictor import SILENCE
+    from puppet.train import REST_FRAMES, silence_tail
+
+    rng = np.random.default_rng(0)
+    steps = rng.uniform(-4, -1, (40 + 3, 160)).astype(np.float32)
+    offsets = rng.normal(0, 0.1, (40, 68, 3)).astype(np.float32)
+    rotation = rng.normal(0, 0.1, (40, 3)).astype(np.float32)
+    before = offsets.copy()
+    silence_tail(steps, offsets, rotation, 40, 20)
+    assert np.all(steps[20:] == SILENCE) and np.all(steps[:20] > SILENCE)
+    np.testing.assert_array_equal(offsets[:20], before[:20])
+    assert np.all(offsets[20 + REST_FRAMES - 1 :] == 0)
+    assert np.all(np.abs(offsets[20]) <= np.abs(before[19]) + 1e-7)
+    assert np.all(rotation[20:] == rotation[19])
