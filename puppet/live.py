@@ -232,6 +232,7 @@ class LivePuppet:
         self.expression = ExpressionBlend(self.rest, settings.expression)
         self.start = time.perf_counter()
         self.life: Life | None = None
+        self.voice_until = -math.inf  # capture time until which the gate let the voice through
         self.apply(settings)
 
     def apply(self, settings: LiveSettings) -> None:
@@ -251,12 +252,16 @@ class LivePuppet:
         if talking and self.gate.level_db > self.settings.gate_db:  # only speech teaches who is speaking
             self.voice.hear(voice)
         self.lips.hear(voice, chunk.end_time)
+        if len(voice):  # until when (capture time) the gate lets the voice through
+            heard_last = chunk.end_time - (self.gate.samples_seen - 1 - self.gate.last_open) / features.SAMPLE_RATE
+            self.voice_until = heard_last + GATE_HOLD if talking else min(self.voice_until, chunk.end_time)
 
     def pose(self, now: float) -> tuple[np.ndarray, float]:
         """(N, 2) float32 mesh positions (image pixels) to present at about `now` (perf_counter),
         and the capture time of the moment of voice they show."""
         moment = now - self.lips.delay(now)
         offsets, rotation = self.lips.at(moment)
+        offsets = offsets * (1.0 - min(max((moment - self.voice_until) / QUIET_AFTER, 0.0), 1.0))  # gate shut: the mouth rests
         activity = min(abs(float(offsets[57, 1])) / (JAW_ACTIVITY * face_scale(self.rest)), 1.0)
         life = self.life.motion(np.array([now - self.start]), features.MOTION_FPS, np.array([activity]), snap_blinks=False)
         motion = Motion(
