@@ -206,11 +206,13 @@ def soak(minutes: float) -> dict:
     done.set()
     sampler.join()
     per_minute = max(1, round(60 / SOAK_SAMPLE))
+    by_minute = [round(max(samples[i : i + per_minute]), 1) for i in range(0, len(samples), per_minute)]
     return figures | {
         "soak_minutes": minutes,
-        "rss_mb_first_minute": round(max(samples[:per_minute]), 1) if samples else None,
-        "rss_mb_last_minute": round(max(samples[-per_minute:]), 1) if samples else None,
-        "rss_mb_max": round(max(samples), 1) if samples else None,
+        "rss_mb_first_minute": by_minute[0] if by_minute else None,
+        "rss_mb_last_minute": by_minute[-1] if by_minute else None,
+        "rss_mb_max": max(by_minute) if by_minute else None,
+        "rss_mb_by_minute": by_minute,
     }
 
 
