@@ -166,11 +166,11 @@ def measure_predictor(seconds: float) -> dict:
 def measure_live(seconds: float, size: tuple[int, int] = LIVE_SIZE, fps: float = LIVE_FPS) -> dict:
     """The live loop, offscreen, driven by the demo clip on repeat as if from a microphone:
     live_fps, live_latency_ms_p50/p95 (voice capture → frame presented), live_dropped_frames."""
-    from puppet import capture, live
+    from puppet import capture, lipsync, live
     from puppet.settings import LiveSettings
     from puppet.window import Offscreen
 
-    if not lipsync_available():
+    if not lipsync.has_model():
         return {}
     image, landmarks, speech = bundle.demo_files()
     puppet = bundle.load(image, landmarks)
@@ -225,12 +225,6 @@ def _rss_mb() -> float:
         import resource
 
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
-
-
-def lipsync_available() -> bool:
-    from puppet import lipsync
-
-    return lipsync.has_model()
 
 
 def main(as_json: bool, seconds: float, clip_seconds: float, soak_minutes: float | None = None) -> int:

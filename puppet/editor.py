@@ -28,9 +28,9 @@ from puppet.bundle import Puppet
 from puppet.errors import PuppetError
 from puppet.life import LifeOptions, life_motion
 from puppet.motion import Motion
-from puppet.renderer import Background, PuppetRenderer, fit, shader_source
+from puppet.renderer import Background, PuppetRenderer, fit
 from puppet.rig import Rig, build
-from puppet.window import Event, TextOverlay
+from puppet.window import Event, Picture, TextOverlay
 
 EDIT_FPS = 60.0  # frames per second while dragging, previewing or just after any input
 IDLE_FPS = 10.0  # frames per second otherwise (the window still repaints)
@@ -155,13 +155,8 @@ class Marks:
     target-sized premultiplied RGBA texture when they change, drawn as one quad."""
 
     def __init__(self, ctx: moderngl.Context):
-        self.ctx = ctx
-        self.program = ctx.program(vertex_shader=shader_source("overlay.vert"), fragment_shader=shader_source("quad.frag"))
-        corners = np.array([0, 0, 1, 0, 0, 1, 1, 1], np.float32)
-        self.corners = ctx.buffer(corners.tobytes())
-        self.quad = ctx.vertex_array(self.program, [(self.corners, "2f", "in_corner")])
-        self.texture = None
-        self.drawn = None  # what the texture shows
+        self.picture = Picture(ctx)
+        self.drawn = None  # what the picture shows
 
     def draw(self, points: np.ndarray, selected: int | None, target_size: tuple[int, int]) -> None:
         """Draw into the bound framebuffer of target_size (width, height).
@@ -170,15 +165,12 @@ class Marks:
         """
         state = (points.tobytes(), selected, tuple(target_size))
         if state != self.drawn:
-            self._rasterise(points, selected, target_size)
+            self.picture.upload(self._rasterise(points, selected, target_size))
             self.drawn = state
-        self.program["u_rect"].value = (0.0, 0.0, 1.0, 1.0)
-        self.ctx.enable(moderngl.BLEND)
-        self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
-        self.texture.use(0)
-        self.quad.render(moderngl.TRIANGLE_STRIP)
+        self.picture.draw((0.0, 0.0, 1.0, 1.0))
 
-    def _rasterise(self, points: np.ndarray, selected: int | None, target_size: tuple[int, int]) -> None:
+    def _rasterise(self, points: np.ndarray, selected: int | None, target_size: tuple[int, int]) -> np.ndarray:
+        """(H, W, 4) uint8 premultiplied RGBA marks the size of the target."""
         width, height = target_size
         plate = np.zeros((height, width, 4), np.uint8)  # drawn on transparent black: AA edges come out premultiplied
         one = 1 << SUBPIXEL_BITS
@@ -192,16 +184,10 @@ class Marks:
             cv2.circle(plate, (x, y), round(radius * one), (*POINT_COLOURS[i].tolist(), 255), -1, cv2.LINE_AA, SUBPIXEL_BITS)
             if i == selected:
                 cv2.circle(plate, (x, y), round((radius + 3) * one), (255, 255, 255, 255), 2, cv2.LINE_AA, SUBPIXEL_BITS)
-        if self.texture is None or self.texture.size != (width, height):
-            if self.texture is not None:
-                self.texture.release()
-            self.texture = self.ctx.texture((width, height), 4)
-        self.texture.write(plate)
+        return plate
 
     def release(self) -> None:
-        for resource in (self.quad, self.corners, self.program, self.texture):
-            if resource is not None:
-                resource.release()
+        self.picture.release()
 
 
 class Editor:

@@ -225,6 +225,7 @@ class LivePuppet:
     def __init__(self, puppet: Puppet, settings: LiveSettings, predictor: Predictor, seed: int = 0):
         self.puppet = puppet
         self.rest = puppet.rig.landmarks
+        self.iod = face_scale(self.rest)
         self.seed = seed
         self.gate = VoiceGate(settings)
         self.lips = LipSync(predictor, self.rest)
@@ -262,7 +263,7 @@ class LivePuppet:
         moment = now - self.lips.delay(now)
         offsets, rotation = self.lips.at(moment)
         offsets = offsets * (1.0 - min(max((moment - self.voice_until) / QUIET_AFTER, 0.0), 1.0))  # gate shut: the mouth rests
-        activity = min(abs(float(offsets[57, 1])) / (JAW_ACTIVITY * face_scale(self.rest)), 1.0)
+        activity = min(abs(float(offsets[57, 1])) / (JAW_ACTIVITY * self.iod), 1.0)
         life = self.life.motion(np.array([now - self.start]), features.MOTION_FPS, np.array([activity]), snap_blinks=False)
         motion = Motion(
             offsets=(offsets + self.expression.offsets(now))[None] + life.offsets,

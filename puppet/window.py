@@ -137,7 +137,7 @@ class Window:
 
 def _glfw_error() -> str:
     """glfw's description of its last error."""
-    code, description = glfw.get_error()
+    _, description = glfw.get_error()
     return description.decode(errors="replace") if description else "no display found"
 
 
@@ -176,53 +176,79 @@ class Offscreen:
             self.owns_context = False
 
 
-class TextOverlay:
-    """Lines of text in the top-left corner of the bound target, on a dark translucent plate.
-
-    The text is rasterised by OpenCV into a texture only when it changes; drawing is one quad.
-    """
-
-    SCALE = 0.5  # OpenCV font scale at 100 % (grows with the target's height)
+class Picture:
+    """A premultiplied RGBA image drawn as one quad over a rectangle of the bound target (the
+    readouts and help text of the live window, the landmark marks of the rig editor)."""
 
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
         self.program = ctx.program(vertex_shader=shader_source("overlay.vert"), fragment_shader=shader_source("quad.frag"))
-        corners = np.array([0, 0, 1, 0, 0, 1, 1, 1], np.float32)
-        self.quad = ctx.vertex_array(self.program, [(ctx.buffer(corners.tobytes()), "2f", "in_corner")])
+        self.corners = ctx.buffer(np.array([0, 0, 1, 0, 0, 1, 1, 1], np.float32).tobytes())
+        self.quad = ctx.vertex_array(self.program, [(self.corners, "2f", "in_corner")])
         self.texture = None
-        self.lines: list[str] = []
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) of the image shown, pixels."""
+        return self.texture.size
+
+    def upload(self, image: np.ndarray) -> None:
+        """image: (H, W, 4) uint8 RGBA, premultiplied, rows top to bottom."""
+        height, width = image.shape[:2]
+        if self.texture is None or self.texture.size != (width, height):
+            if self.texture is not None:
+                self.texture.release()
+            self.texture = self.ctx.texture((width, height), 4)
+        self.texture.write(np.ascontiguousarray(image))
+
+    def draw(self, rect: tuple[float, float, float, float]) -> None:
+        """rect: x, y, width, height as fractions of the target, from its top-left corner."""
+        self.program["u_rect"].value = rect
+        self.ctx.enable(moderngl.BLEND)
+        self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
+        self.texture.use(0)
+        self.quad.render(moderngl.TRIANGLE_STRIP)
 
     def release(self) -> None:
-        for resource in (self.texture, self.quad, self.program):
+        for resource in (self.texture, self.quad, self.corners, self.program):
             if resource is not None:
                 resource.release()
+
+
+class TextOverlay:
+    """Lines of text in the top-left corner of the bound target, on a dark translucent plate,
+    rasterised by OpenCV only when they change."""
+
+    SCALE = 0.5  # OpenCV font scale at 100 % (grows with the target's height)
+
+    def __init__(self, ctx: moderngl.Context):
+        self.picture = Picture(ctx)
+        self.shown: tuple[list[str], float] | None = None  # the lines and font scale the picture holds
+
+    def release(self) -> None:
+        self.picture.release()
 
     def draw(self, lines: list[str], target_size: tuple[int, int]) -> None:
         """Draw `lines` over whatever is in the bound framebuffer of target_size (width, height)."""
         if not lines or min(target_size) <= 0:
             return
         scale = self.SCALE * max(1.0, target_size[1] / 720)
-        if lines != self.lines or self.texture is None or self.texture.extra != scale:
-            self._rasterise(lines, scale)
-        width, height = self.texture.size
-        self.program["u_rect"].value = (8.0 / target_size[0], 8.0 / target_size[1], width / target_size[0], height / target_size[1])
-        self.ctx.enable(moderngl.BLEND)
-        self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
-        self.texture.use(0)
-        self.quad.render(moderngl.TRIANGLE_STRIP)
+        if self.shown != (lines, scale):
+            self.picture.upload(_text_plate(lines, scale))
+            self.shown = (list(lines), scale)
+        width, height = self.picture.size
+        self.picture.draw((8.0 / target_size[0], 8.0 / target_size[1], width / target_size[0], height / target_size[1]))
 
-    def _rasterise(self, lines: list[str], scale: float) -> None:
-        font, thickness = cv2.FONT_HERSHEY_SIMPLEX, 1
-        line_height = int(32 * scale) + 4
-        width = max(cv2.getTextSize(line, font, scale, thickness)[0][0] for line in lines) + 16
-        plate = np.zeros((line_height * len(lines) + 10, width, 4), np.uint8)
-        plate[...] = (0, 0, 0, 160)
-        for i, line in enumerate(lines):
-            cv2.putText(plate, line, (8, line_height * (i + 1)), font, scale, (255, 255, 255, 255), thickness, cv2.LINE_AA)
-        alpha = plate[..., 3:4].astype(np.uint16)
-        plate[..., :3] = (plate[..., :3].astype(np.uint16) * alpha // 255).astype(np.uint8)  # premultiplied
-        if self.texture is not None:
-            self.texture.release()
-        self.texture = self.ctx.texture((width, plate.shape[0]), 4, np.ascontiguousarray(plate).tobytes())
-        self.texture.extra = scale
-        self.lines = list(lines)
+
+def _text_plate(lines: list[str], scale: float) -> np.ndarray:
+    """(H, W, 4) uint8 premultiplied RGBA: white lines on a translucent black plate."""
+    font, thickness = cv2.FONT_HERSHEY_SIMPLEX, 1
+    line_height = int(32 * scale) + 4
+    width = max(cv2.getTextSize(line, font, scale, thickness)[0][0] for line in lines) + 16
+    plate = np.zeros((line_height * len(lines) + 10, width, 4), np.uint8)
+    plate[...] = (0, 0, 0, 160)
+    for i, line in enumerate(lines):
+        cv2.putText(plate, line, (8, line_height * (i + 1)), font, scale, (255, 255, 255, 255), thickness, cv2.LINE_AA)
+    alpha = plate[..., 3:4].astype(np.uint16)
+    plate[..., :3] = (plate[..., :3].astype(np.uint16) * alpha // 255).astype(np.uint8)
+    return plate
