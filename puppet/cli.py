@@ -156,10 +156,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument("--corpus", type=Path, default=Path.home() / ".cache" / "puppet" / "corpus", help="corpus folder (default ~/.cache/puppet/corpus)")
     train.add_argument("--hours", type=float, default=3.5, help="hours of speech in the corpus (default 3.5)")
-    train.add_argument("--out", type=Path, default=Path("runs") / "landmarks", help="checkpoints, logs and the ONNX model (default runs/landmarks)")
+    train.add_argument("--out", type=Path, default=Path("runs") / "landmarks", help="checkpoints, logs and ONNX models, in OUT/streaming and OUT/offline (default runs/landmarks)")
+    train.add_argument("--model", choices=["both", "streaming", "offline"], default="both", help="which model to train: the live one (hears 60 ms ahead), the one for files (300 ms), or both (default)")
     train.add_argument("--steps", type=int, help="training steps (default: the training config's)")
     train.add_argument("--seed", type=int, default=0, help="corpus seed (default 0)")
-    train.add_argument("--install", action="store_true", help="copy the exported model into this install's assets/models")
+    train.add_argument("--install", action="store_true", help="copy the exported models into this install's assets/models")
 
     evaluate = commands.add_parser(
         "eval",
@@ -309,17 +310,19 @@ def _train(args: argparse.Namespace) -> int:
 
     corpus.build(args.corpus, corpus.CorpusOptions(hours=args.hours, seed=args.seed))
     labels.label(args.corpus)
-    config = train.TrainConfig(corpus=str(args.corpus), out=str(args.out))
-    if args.steps:
-        config = change(config, steps=args.steps)
-    train.train(config)
-    model = args.out / train.ONNX_FILE
-    if args.install:
-        from puppet.predictor import default_model
+    from puppet.predictor import default_model
 
-        shutil.copyfile(model, default_model())
-        print(f"installed {model} as {default_model()}")
-    print(f"trained: {model}")
+    for kind in ["streaming", "offline"] if args.model == "both" else [args.model]:
+        config = train.recipe(kind, corpus=str(args.corpus), out=str(args.out / kind))
+        if args.steps:
+            config = change(config, steps=args.steps)
+        print(f"training the {kind} model")
+        train.train(config)
+        model = args.out / kind / train.ONNX_FILE
+        if args.install:
+            shutil.copyfile(model, default_model(kind))
+            print(f"installed {model} as {default_model(kind)}")
+        print(f"trained: {model}")
     return 0
 
 

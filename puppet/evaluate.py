@@ -5,9 +5,12 @@ Every source is a function from 16 kHz speech to canonical offsets `(T, 68, 3)` 
 (inter-ocular-distance units, head frame; see `puppet.visemes.canonical_rest`) and a head
 rotation `(T, 3)`, or None for a still head. Real videos are
 tracked with the project's own detector; each frame is aligned to the canonical face by a
-similarity fit on the stable points (eye corners, nose), which removes head pose, and the
-speaker's own rest face is the clip's per-landmark median: a prediction is that rest plus the
-source's offsets (q + Δq, as in the paper).
+similarity fit on the stable points (eye corners, nose), which removes head pose. The speaker's
+own rest face q is the per-landmark median of the clip's frames with the most closed lips (the
+lowest REST_QUANTILE of inner-lip opening): the face at rest, as a portrait shows it and as the
+network's offsets start from (its silence is lips together). A prediction is q plus the source's
+offsets (q + Δq, as in the paper); the static face is q held still. (The clip's median face is not
+a rest: mid-speech, its lips are half open, and offsets added to it open the mouth twice.)
 
 Metrics (lower is better, except the correlation):
 - D-LL / D-VL: mean distance of jaw and lip landmarks / of their frame-to-frame velocities,
@@ -34,6 +37,7 @@ from puppet.motion import resample
 # (N,) float32 16 kHz speech → ((T, 68, 3) canonical offsets, (T, 3) head rotation or None: a still head)
 Source = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]
 JAW_AND_LIPS = list(lm.JAW) + list(lm.MOUTH)
+REST_QUANTILE = 0.1  # share of a real clip's frames, the most closed, whose median face is its rest
 STABLE_POINTS = [36, 39, 42, 45, 27, 28, 29, 30, 31, 33, 35]  # eye corners, nose: no speech motion
 
 
@@ -87,6 +91,13 @@ def align_to(points: np.ndarray, target: np.ndarray) -> np.ndarray:
     return aligned
 
 
+def rest_face(points: np.ndarray) -> np.ndarray:
+    """(68, 2) a speaker's rest face from (T, 68, 2) aligned frames of speech: the per-landmark median
+    of the frames with the most closed lips (the lowest REST_QUANTILE of inner-lip opening)."""
+    opening = lip_opening(points)
+    return np.median(points[opening <= np.quantile(opening, REST_QUANTILE)], axis=0)
+
+
 def video_reference(path: Path, cache: Path | None = None) -> tuple[np.ndarray, float, np.ndarray]:
     """Real landmarks of a talking video: ((T, 68, 2) float32 pixels, fps, (N,) float32 16 kHz audio).
 
@@ -115,7 +126,7 @@ def score_video(path: Path, sources: dict[str, Source], canonical: np.ndarray, c
     points, fps, samples = video_reference(path, cache)
     valid = ~np.isnan(points).any(axis=(1, 2))
     aligned = align_to(points[valid], canonical)
-    rest = np.median(aligned, axis=0)
+    rest = rest_face(aligned)
     scores = {}
     for name, source in sources.items():
         offsets = resample(source(samples)[0], MOTION_FPS, fps, len(points))[valid]
@@ -144,8 +155,9 @@ def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sour
 
 
 def baselines(canonical: np.ndarray) -> dict[str, Source]:
-    """The sources every run scores: the learned network (when this install has one), the loudness
-    baseline and a static face; each maps 16 kHz speech to (offsets (T, 68, 3), rotation (T, 3) | None)."""
+    """The sources every run scores: the learned networks (when this install has them: "learned" is the
+    offline model files are rendered with, "learned-live" the streaming one), the loudness baseline
+    and a static face; each maps 16 kHz speech to (offsets (T, 68, 3), rotation (T, 3) | None)."""
     from puppet import lipsync, speaker
     from puppet.loudness import loudness_motion
 
@@ -157,10 +169,10 @@ def baselines(canonical: np.ndarray) -> dict[str, Source]:
 
     sources = {"static": static, "loudness": loudness}
     if lipsync.has_model():
-        def learned(samples):
-            return lipsync.shipped_predictor().predict(samples, speaker.embed(samples))
+        def learned(kind):
+            return lambda samples: lipsync.shipped_predictor(kind).predict(samples, speaker.embed(samples))
 
-        sources = {"learned": learned, **sources}
+        sources = {"learned": learned("offline"), "learned-live": learned("streaming"), **sources}
     return sources
 
 

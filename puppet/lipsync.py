@@ -3,6 +3,8 @@
 The network (puppet.predictor) hears the voice and its speaker embedding (puppet.speaker) and
 gives landmark offsets in face units at MOTION_FPS plus a head rotation; here they are scaled and
 turned onto the portrait's own face (q + Δq, as in MakeItTalk) and resampled to the video's rate.
+Files use the offline model, which hears 300 ms ahead (the paper's content window); the live
+window uses the streaming one, which hears 60 ms ahead.
 """
 import functools
 
@@ -12,18 +14,18 @@ from puppet import speaker
 from puppet.features import MOTION_FPS, SAMPLE_RATE
 from puppet.landmarks import from_face_units
 from puppet.motion import Motion, resample
-from puppet.predictor import Predictor, default_model
+from puppet.predictor import MODEL_FILES, Predictor, default_model
 
 
 @functools.cache
-def shipped_predictor() -> Predictor:
-    """The trained model in assets/models, loaded once."""
-    return Predictor(default_model())
+def shipped_predictor(kind: str = "offline") -> Predictor:
+    """A trained model in assets/models, "offline" or "streaming", loaded once."""
+    return Predictor(default_model(kind))
 
 
 def has_model() -> bool:
-    """Whether a trained model ships with this install."""
-    return default_model().is_file()
+    """Whether the trained models ship with this install."""
+    return all(default_model(kind).is_file() for kind in MODEL_FILES)
 
 
 def learned_motion(samples: np.ndarray, rest: np.ndarray, fps: float, frames: int, predictor: Predictor | None = None) -> Motion:

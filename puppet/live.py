@@ -440,7 +440,7 @@ def run(puppet: Puppet, source: AudioSource, display, options: LiveOptions, sett
     """
     from puppet.lipsync import shipped_predictor
 
-    live = LivePuppet(puppet, settings, predictor or shipped_predictor(), options.seed)
+    live = LivePuppet(puppet, settings, predictor or shipped_predictor("streaming"), options.seed)
     controls = Controls(settings)
     renderer = PuppetRenderer(display.ctx, puppet.image, puppet.rig)
     overlay = TextOverlay(display.ctx)

@@ -263,6 +263,16 @@ def position_loss(predicted: torch.Tensor, target: torch.Tensor, mask: torch.Ten
     return (per_frame * mask).sum() / mask.sum().clamp(min=1.0)
 
 
+def velocity_loss(predicted: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Σ_i ‖(p_i(t+1) − p_i(t)) − (p̂_i(t+1) − p̂_i(t))‖² per frame pair, averaged over pairs whose two
+    frames are both masked in. predicted, target: (B, T, 68, 3); mask: (B, T). (Not in MakeItTalk: it
+    aims at the paper's D-VL directly.)"""
+    difference = (predicted - target).diff(dim=1)
+    per_pair = difference.square().sum((-1, -2))
+    pairs = mask[:, 1:] * mask[:, :-1]
+    return (per_pair * pairs).sum() / pairs.sum().clamp(min=1.0)
+
+
 def laplacian_loss(predicted: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     """Second term of Eq. 8: Σ_i ‖L(p_i) − L(p̂_i)‖² per frame (L is linear, so L(p) − L(p̂) = L(p − p̂)),
     averaged over the masked frames. predicted, target: (B, T, 68, 3); mask: (B, T)."""

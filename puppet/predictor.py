@@ -21,7 +21,9 @@ import onnxruntime as ort
 from puppet import features
 from puppet.errors import PuppetError
 
-MODEL_FILE = "models/landmarks.onnx"  # in the puppet.assets package (the repository's assets/)
+# The shipped models, in the puppet.assets package (the repository's assets/): the same network
+# trained to hear 60 ms ahead (live) or 300 ms ahead (files, where the whole clip is known).
+MODEL_FILES = {"streaming": "models/landmarks.onnx", "offline": "models/landmarks_offline.onnx"}
 SPEAKER_DIM = 256  # puppet.speaker.embed's output
 N_STEP = features.N_MELS * features.FRAMES_PER_MOTION  # 160 log-mel values per motion step
 SILENCE = float(np.log10(features.LOG_FLOOR))  # -5.0: the log-mel of digital silence
@@ -30,9 +32,9 @@ CONTEXT_FRAMES = -(-(features.N_FFT // 2) // features.HOP)  # 2 frames of sample
 OFFLINE_CHUNK = 200  # motion steps per network run offline (4 s): attention cost grows with chunk², LSTM's not
 
 
-def default_model() -> Path:
-    """The trained model shipped with puppet."""
-    return Path(str(files("puppet.assets") / MODEL_FILE))
+def default_model(kind: str = "streaming") -> Path:
+    """The trained model shipped with puppet: "streaming" (live) or "offline" (files)."""
+    return Path(str(files("puppet.assets") / MODEL_FILES[kind]))
 
 
 def to_mono_16k(samples: np.ndarray, sample_rate: int = features.SAMPLE_RATE) -> np.ndarray:

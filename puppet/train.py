@@ -23,7 +23,7 @@ import sys
 import time
 import warnings
 import wave
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +32,7 @@ import torch
 from puppet import features
 from puppet.errors import PuppetError
 from puppet.network import (
+    LOOKAHEAD,
     N_LANDMARKS,
     Discriminator,
     Network,
@@ -42,6 +43,7 @@ from puppet.network import (
     parameter_count,
     position_loss,
     soft_limit,
+    velocity_loss,
 )
 from puppet.predictor import N_STEP, SILENCE, audio_steps
 
@@ -69,6 +71,7 @@ class TrainConfig:
     laplacian_weight: float = 1.0  # λ of Eq. 8 and 12 (paper: 1)
     rotation_weight: float = 10.0  # head rotation (radians²) against landmark positions (IOD², summed over 68)
     content_weight: float = 0.5  # the content branch alone must fit the targets too: it carries the mouth
+    velocity_weight: float = 0.0  # frame-to-frame velocity error (IOD² per frame, summed over 68) against positions
     gan: bool = True  # train the speaker branch against the LSGAN discriminator of Eq. 10–12
     gan_weight: float = 0.01  # μ_s of Eq. 12
     grad_clip: float = 1.0
@@ -79,6 +82,23 @@ class TrainConfig:
     feature_augment: bool = True  # recolour, re-level and band-mask each training window's log-mels (see augment_steps)
     silence_tails: float = 0.1  # share of training windows cut to silence part-way, the mouth easing to rest (see silence_tail)
     network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1))  # ignored when resuming
+
+
+# The two shipped models (puppet.predictor.MODEL_FILES): one recipe, two lookaheads. The live window
+# can wait only 60 ms for the future; a file is known whole, so its model hears the 300 ms the paper's
+# content window spans and can anticipate a rounding or a closure the way lips do.
+RECIPES = {
+    "streaming": {"lookahead": LOOKAHEAD, "velocity_weight": 0.0},
+    "offline": {"lookahead": 15, "velocity_weight": 0.0},
+}
+
+
+def recipe(kind: str, corpus: str, out: str) -> TrainConfig:
+    """The TrainConfig that made the shipped `kind` model ("streaming" or "offline")."""
+    settings = RECIPES[kind]
+    base = TrainConfig()
+    return replace(base, corpus=corpus, out=out, velocity_weight=settings["velocity_weight"],
+                   network=replace(base.network, lookahead=settings["lookahead"]))
 
 
 # -- data ------------------------------------------------------------------------------------------
@@ -238,10 +258,12 @@ def generator_losses(model: Network, batch: dict, config: TrainConfig, discrimin
         "rotation": ((rotation - batch["rotation"]).square().sum(-1) * mask).sum() / mask.sum().clamp(min=1.0),
         "content_position": position_loss(content, batch["offsets"], mask),
         "content_laplacian": laplacian_loss(content, batch["offsets"], mask),
+        "velocity": velocity_loss(offsets, batch["offsets"], mask),
     }
     total = (
         terms["position"] + config.laplacian_weight * terms["laplacian"] + config.rotation_weight * terms["rotation"]
         + config.content_weight * (terms["content_position"] + config.laplacian_weight * terms["content_laplacian"])
+        + config.velocity_weight * terms["velocity"]
     )
     fake = None
     if discriminator is not None:
@@ -496,6 +518,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--no-gan", action="store_true", help="train without the adversarial loss")
     parser.add_argument("--no-feature-augment", action="store_true", help="train on the log-mels as they are (no recolouring, re-levelling, band masks)")
     parser.add_argument("--dropout", type=float, default=defaults.network.dropout, help=f"dropout between the content LSTM's layers (default {defaults.network.dropout})")
+    parser.add_argument("--lookahead", type=int, default=defaults.network.lookahead, help=f"motion frames of future audio the network hears (default {defaults.network.lookahead}: 60 ms, for streaming; 15 = 300 ms, the paper's window, for offline rendering)")
+    parser.add_argument("--velocity-weight", type=float, default=defaults.velocity_weight, help=f"weight of the frame-to-frame velocity loss (default {defaults.velocity_weight})")
     parser.add_argument("--threads", type=int, default=defaults.threads)
     parser.add_argument("--device", default=defaults.device, help="torch device, e.g. cuda (default cpu)")
     return parser
@@ -506,7 +530,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         corpus=args.corpus, out=args.out, steps=args.steps, batch_size=args.batch_size,
         sequence_frames=args.sequence_frames, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
         checkpoint_every=args.checkpoint_every, gan=not args.no_gan, threads=args.threads, device=args.device,
-        feature_augment=not args.no_feature_augment, network=NetworkConfig(dropout=args.dropout),
+        feature_augment=not args.no_feature_augment, velocity_weight=args.velocity_weight,
+        network=NetworkConfig(dropout=args.dropout, lookahead=args.lookahead),
     )
 
 

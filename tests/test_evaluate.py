@@ -38,6 +38,15 @@ def test_alignment_removes_head_pose():
     assert np.abs(evaluate.align_to(seen, canonical_rest()) - faces).max() < 0.01
 
 
+def test_the_rest_face_has_closed_lips():
+    """Half the frames talk (lips apart), half rest: the rest face is the resting one, not the median."""
+    rest = canonical_rest()[:, :2]
+    talking = rest.copy()
+    talking[65:68, 1] += 0.3  # the lower inner lip drops
+    frames = np.stack([talking] * 60 + [rest] * 40)
+    np.testing.assert_allclose(evaluate.rest_face(frames), rest)
+
+
 def test_real_video_is_tracked_and_baselines_are_scored(tmp_path):
     video = shared("video", "face_1.mp4")
     canonical = canonical_rest()

@@ -64,7 +64,7 @@ def test_sensitivity_is_a_gain_in_decibels():
 
 
 def test_speech_frames_are_stamped_with_the_moment_they_depict(speech, demo):
-    lips = LipSync(shipped_predictor(), demo.rig.landmarks)
+    lips = LipSync(shipped_predictor("streaming"), demo.rig.landmarks)
     for chunk, now in blocks(speech[: 2 * RATE]):
         lips.hear(chunk.samples, chunk.end_time)
         delay = lips.delay(now)
@@ -72,13 +72,13 @@ def test_speech_frames_are_stamped_with_the_moment_they_depict(speech, demo):
     first = lips.emitted - len(lips.times)
     expected = 100.0 + (step * np.arange(first, lips.emitted) + step // 2) / RATE
     np.testing.assert_allclose(list(lips.times), expected, atol=1e-9)
-    lookahead = live.lookahead_seconds(shipped_predictor())
+    lookahead = live.lookahead_seconds(shipped_predictor("streaming"))
     assert lookahead == pytest.approx(0.0725)
     assert lookahead <= delay <= lookahead + 0.03  # frames come every 20 ms, audio every 5
 
 
 def test_the_mouth_moves_with_speech_and_rests_in_silence(speech, demo):
-    puppet = LivePuppet(demo, LiveSettings(blink_rate=0.0), shipped_predictor())
+    puppet = LivePuppet(demo, LiveSettings(blink_rate=0.0), shipped_predictor("streaming"))
     rest = demo.rig.landmarks
     clip = np.concatenate([speech[: 3 * RATE], np.zeros(RATE, np.float32)])
     gaps = []
@@ -94,7 +94,7 @@ def test_the_mouth_moves_with_speech_and_rests_in_silence(speech, demo):
 
 
 def test_muted_voice_leaves_the_mouth_at_rest(speech, demo):
-    puppet = LivePuppet(demo, LiveSettings(blink_rate=0.0), shipped_predictor())
+    puppet = LivePuppet(demo, LiveSettings(blink_rate=0.0), shipped_predictor("streaming"))
     rest = demo.rig.landmarks
     gaps = []
     for chunk, now in blocks(speech[: 2 * RATE], start=puppet.start):
@@ -106,7 +106,7 @@ def test_muted_voice_leaves_the_mouth_at_rest(speech, demo):
 
 def test_a_hotkey_changes_the_expression(demo):
     controls = Controls(LiveSettings())
-    puppet = LivePuppet(demo, controls.settings, shipped_predictor())
+    puppet = LivePuppet(demo, controls.settings, shipped_predictor("streaming"))
     before = puppet.pose(puppet.start + 0.5)[0]
     assert controls.handle(Event("key", "2"))
     assert controls.settings.expression == "happy"
@@ -167,7 +167,7 @@ def test_the_loop_renders_at_the_target_rate_with_bounded_latency(gl, demo, demo
     summary = stats.summary()
     assert 26 <= summary["fps"] <= 31
     assert summary["dropped_frames"] <= 3
-    lookahead_ms = 1000 * live.lookahead_seconds(shipped_predictor())
+    lookahead_ms = 1000 * live.lookahead_seconds(shipped_predictor("streaming"))
     assert lookahead_ms < summary["latency_ms_p50"] <= summary["latency_ms_p95"] < 140
     assert settings.load(path).expression == "angry"
     sent = backend.instances[-1]
@@ -316,7 +316,7 @@ def test_without_a_display_says_to_use_no_window(demo_speech):
 
 
 def test_the_voice_is_learned_from_speech_not_from_silence(speech, demo):
-    puppet = LivePuppet(demo, LiveSettings(), shipped_predictor())
+    puppet = LivePuppet(demo, LiveSettings(), shipped_predictor("streaming"))
     for chunk, _ in blocks(np.zeros(4 * RATE, np.float32), start=puppet.start):
         puppet.hear(chunk, True)
     assert puppet.voice.seconds == 0

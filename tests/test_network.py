@@ -10,6 +10,7 @@ from puppet.network import (
     laplacian_loss,
     lsgan_losses,
     position_loss,
+    velocity_loss,
 )
 
 SMALL = NetworkConfig(content_hidden=32, content_mlp=(64, 32), content_code=16, speaker_reduced=16, window=16, speaker_mlp=32)
@@ -87,6 +88,18 @@ def test_laplacian_loss():
     assert laplacian_loss(moved, target, mask) > 0
     assert position_loss(moved, target, mask) == pytest.approx(0.01, rel=1e-4)
     assert torch.allclose(LAPLACIAN.sum(1), torch.zeros(68), atol=1e-6)  # rows: point minus mean of neighbours
+
+
+def test_velocity_loss():
+    """Zero for a shifted copy (same velocities); positive for a jittered one; masked frames don't count."""
+    mask = torch.ones(1, 6)
+    target = torch.randn(1, 6, 68, 3)
+    assert velocity_loss(target + 0.5, target, mask) < 1e-9
+    jitter = target.clone()
+    jitter[:, 3, 62, 1] += 0.1  # one frame of one inner-lip point: two velocities off by 0.1
+    assert velocity_loss(jitter, target, mask) == pytest.approx(2 * 0.01 / 5, rel=1e-4)
+    mask[:, 3] = 0  # both pairs touching frame 3 drop out
+    assert velocity_loss(jitter, target, mask) < 1e-9
 
 
 def test_discriminator_and_lsgan():

@@ -11,19 +11,29 @@ from puppet.predictor import Predictor, default_model
 SECONDS = 7  # longer than the 256-frame attention window (5.12 s), so the window slides in the tests
 
 
-@pytest.fixture(scope="module")
-def model(tmp_path_factory):
+def exported(folder, lookahead: int) -> Predictor:
     """A full-size network with random weights, exported as training exports it."""
     torch = pytest.importorskip("torch")
-    from puppet.network import Network
+    from puppet.network import Network, NetworkConfig
     from puppet.train import export
 
     torch.manual_seed(0)
-    net = Network()
+    net = Network(NetworkConfig(lookahead=lookahead))
     torch.nn.init.normal_(net.speaker_mlp[-1].weight, std=0.05)  # wake the zero-initialised speaker branch
-    folder = tmp_path_factory.mktemp("model")
     torch.save({"model_args": asdict(net.config), "model": net.state_dict()}, folder / "checkpoint.pt")
     return Predictor(export(folder / "checkpoint.pt", folder / "landmarks.onnx"))
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory):
+    """The streaming layout: 60 ms of lookahead."""
+    return exported(tmp_path_factory.mktemp("model"), 3)
+
+
+@pytest.fixture(scope="module")
+def offline_model(tmp_path_factory):
+    """The offline layout: 300 ms of lookahead."""
+    return exported(tmp_path_factory.mktemp("offline"), 15)
 
 
 @pytest.fixture(scope="module")
@@ -55,8 +65,10 @@ def test_frame_count_and_metadata(model, speech, speaker):
     assert 1000 * model.lookahead / model.fps + 1000 * features.WINDOW / 2 / features.SAMPLE_RATE <= 80 and model.fps == features.MOTION_FPS and model.n_landmarks == 68
 
 
+@pytest.mark.parametrize("layout", ["model", "offline_model"])
 @pytest.mark.parametrize("seed", [0, 1])
-def test_stream_equals_offline(model, speech, speaker, seed):
+def test_stream_equals_offline(request, layout, speech, speaker, seed):
+    model = request.getfixturevalue(layout)
     offline = model.predict(speech, speaker)
     rng = np.random.default_rng(seed)
     stream, parts, position = model.stream(speaker), [], 0
@@ -72,8 +84,10 @@ def test_stream_equals_offline(model, speech, speaker, seed):
     np.testing.assert_allclose(rotation, offline[1], atol=1e-4, rtol=0)
 
 
-def test_stream_latency(model, speaker):
+@pytest.mark.parametrize("layout", ["model", "offline_model"])
+def test_stream_latency(request, layout, speaker):
     """A frame comes out once its audio and the lookahead after it have arrived, never later."""
+    model = request.getfixturevalue(layout)
     stream = model.stream(speaker)
     emitted = 0
     for n in range(0, 16000, 160):
@@ -109,13 +123,14 @@ def test_hostile_input_gives_bounded_motion(model, speech, speaker, kind):
     assert np.abs(offsets).max() < 1.0 and np.abs(rotation).max() < 0.8
 
 
-def test_shipped_model_closes_the_mouth_in_silence(speaker):
-    """With the trained model: silence → inner lips together, head near still."""
-    if not default_model().exists():
+@pytest.mark.parametrize("kind", ["streaming", "offline"])
+def test_shipped_model_closes_the_mouth_in_silence(speaker, kind):
+    """With each trained model: silence → inner lips together, head near still."""
+    if not default_model(kind).exists():
         pytest.skip("no trained model in assets/models yet")
     from puppet.landmarks import INNER_LIP_PAIRS
 
-    predictor = Predictor()
+    predictor = Predictor(default_model(kind))
     offsets, _ = predictor.predict(np.zeros(2 * features.SAMPLE_RATE, np.float32), speaker)
     upper, lower = [p[0] for p in INNER_LIP_PAIRS], [p[1] for p in INNER_LIP_PAIRS]
     opening = offsets[:, lower, 1] - offsets[:, upper, 1]  # IOD units, y down: > 0 opens the mouth

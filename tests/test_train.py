@@ -171,3 +171,16 @@ def test_a_silence_tail_silences_the_audio_and_brings_the_mouth_to_rest():
     assert np.all(offsets[20 + REST_FRAMES - 1 :] == 0)
     assert np.all(np.abs(offsets[20]) <= np.abs(before[19]) + 1e-7)
     assert np.all(rotation[20:] == rotation[19])
+
+
+@pytest.mark.parametrize("kind", ["streaming", "offline"])
+def test_recipes_match_the_shipped_models(kind):
+    """`puppet train` rebuilds each shipped model with the lookahead it was exported with."""
+    from puppet.predictor import Predictor, default_model
+    from puppet.train import recipe
+
+    if not default_model(kind).exists():
+        pytest.skip("no trained model in assets/models yet")
+    config = recipe(kind, corpus="corpus", out="runs")
+    assert Predictor(default_model(kind)).lookahead == config.network.lookahead
+    assert config.network.lookahead * 1000 // features.MOTION_FPS <= (60 if kind == "streaming" else 300)
