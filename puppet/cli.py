@@ -172,6 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--videos", type=Path, help="folder of talking-face videos with speech (.mp4, .mov, .mkv)")
     evaluate.add_argument("--speech", type=Path, help="folder of real recordings with transcripts (NAME.wav + NAME.txt): what the mouth does on p/b/m, vowels, oo/ee and silence")
     evaluate.add_argument("--json", type=Path, help="also write the scores here")
+    evaluate.add_argument("--plots", type=Path, metavar="DIR", help="also draw each video's lip opening over time, real against each source, as DIR/NAME.png")
     evaluate.add_argument("--limit", type=int, default=200, help="held-out utterances scored at most (default 200)")
 
     bench = commands.add_parser("bench", help="measure rendering and export speed on this machine")
@@ -338,7 +339,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         results["synthetic"] = score_corpus(args.corpus, args.limit)
         print(format_table(f"held-out synthetic voices ({args.corpus})", results["synthetic"]))
     if args.videos is not None:
-        results["video"] = score_videos(args.videos)
+        results["video"] = score_videos(args.videos, plots=args.plots)
         print(format_table(f"real talking videos ({args.videos})", results["video"]))
     if args.speech is not None:
         results["speech"] = score_phones(args.speech)

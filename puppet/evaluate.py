@@ -121,17 +121,57 @@ def video_reference(path: Path, cache: Path | None = None) -> tuple[np.ndarray, 
     return points, fps, samples
 
 
-def score_video(path: Path, sources: dict[str, Source], canonical: np.ndarray, cache: Path | None = None) -> dict:
-    """{source name: metrics} for one real video; canonical: (68, 3) canonical rest (IOD units)."""
+def video_predictions(path: Path, sources: dict[str, Source], canonical: np.ndarray, cache: Path | None = None):
+    """One real video, aligned to canonical (68, 3) IOD units: (real (T, 68, 2), {source name:
+    predicted (T, 68, 2)}, fps), over the T frames where the face was found."""
     points, fps, samples = video_reference(path, cache)
     valid = ~np.isnan(points).any(axis=(1, 2))
     aligned = align_to(points[valid], canonical)
     rest = rest_face(aligned)
-    scores = {}
+    predicted = {}
     for name, source in sources.items():
         offsets = resample(source(samples)[0], MOTION_FPS, fps, len(points))[valid]
-        scores[name] = metrics(rest[None] + offsets[..., :2], aligned)
-    return scores
+        predicted[name] = rest[None] + offsets[..., :2]
+    return aligned, predicted, fps
+
+
+def score_video(path: Path, sources: dict[str, Source], canonical: np.ndarray, cache: Path | None = None, plot: Path | None = None) -> dict:
+    """{source name: metrics} for one real video; canonical: (68, 3) canonical rest (IOD units).
+    With `plot`, a picture of its lip opening is written there too (see plot_openings)."""
+    real, predicted, fps = video_predictions(path, sources, canonical, cache)
+    if plot is not None:
+        plot_openings(path.name, real, predicted, fps, plot)
+    return {name: metrics(points, real) for name, points in predicted.items()}
+
+
+PLOT_COLOURS = {"real": (20, 20, 20), "learned": (200, 90, 30), "learned-live": (230, 170, 90), "loudness": (60, 140, 230)}  # BGR
+
+
+def plot_openings(title: str, real: np.ndarray, predicted: dict[str, np.ndarray], fps: float, out: Path) -> None:
+    """A picture of a video's inner-lip opening over time, written to `out` (.png or .jpg): a row
+    per moving source, its curve over the real one. real, predicted: (T, 68, 2) as video_predictions."""
+    import cv2
+
+    curves = {name: lip_opening(points) for name, points in predicted.items() if name != "static"}
+    width, row, margin = 1200, 150, 40
+    picture = np.full((margin + row * len(curves), width, 3), 255, np.uint8)
+    truth = lip_opening(real)
+    top = max(truth.max(), *(c.max() for c in curves.values()), 1e-6)
+    seconds = len(truth) / fps
+    cv2.putText(picture, f"{title}: inner-lip opening (IOD units, 0 to {top:.2f}) over {seconds:.1f} s",
+                (10, 26), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 1, cv2.LINE_AA)
+    x = np.linspace(10, width - 10, len(truth))
+    for i, (name, curve) in enumerate(curves.items()):
+        base = margin + row * (i + 1) - 12
+        cv2.line(picture, (10, base), (width - 10, base), (210, 210, 210), 1)
+        for values, colour in ((truth, PLOT_COLOURS["real"]), (curve, PLOT_COLOURS.get(name, (120, 120, 120)))):
+            line = np.stack([x, base - values / top * (row - 30)], axis=1).round().astype(np.int32)
+            cv2.polylines(picture, [line], False, colour, 2, cv2.LINE_AA)
+        corr = metrics(predicted[name], real)["lip_corr"]
+        cv2.putText(picture, f"real (black) vs {name}: correlation {corr:.2f}", (14, base - row + 40),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.55, PLOT_COLOURS.get(name, (120, 120, 120)), 1, cv2.LINE_AA)
+    if not cv2.imwrite(str(out), picture):
+        raise PuppetError(f"cannot write {out} (give a .png or .jpg path in an existing folder)")
 
 
 def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sources: dict[str, Source], canonical: np.ndarray) -> dict:
@@ -195,8 +235,9 @@ def score_corpus(corpus: Path, limit: int) -> dict:
     return score_synthetic(items, baselines(canonical), canonical)
 
 
-def score_videos(folder: Path, cache: Path | None = None) -> dict:
-    """Metrics averaged over the talking videos in a folder (each video counts once)."""
+def score_videos(folder: Path, cache: Path | None = None, plots: Path | None = None) -> dict:
+    """Metrics averaged over the talking videos in a folder (each video counts once); with `plots`,
+    a picture of each video's lip opening is written there as NAME.png (see plot_openings)."""
     from puppet.visemes import canonical_rest
 
     videos = sorted(p for p in Path(folder).glob("*") if p.suffix.lower() in (".mp4", ".mov", ".mkv"))
@@ -205,7 +246,9 @@ def score_videos(folder: Path, cache: Path | None = None) -> dict:
     canonical = canonical_rest()
     sources = baselines(canonical)
     cache = cache or Path.home() / ".cache" / "puppet" / "tracks"
-    per_video = [score_video(path, sources, canonical, cache) for path in videos]
+    if plots is not None:
+        plots.mkdir(parents=True, exist_ok=True)
+    per_video = [score_video(path, sources, canonical, cache, plots / f"{path.stem}.png" if plots else None) for path in videos]
     return {name: {key: float(np.mean([v[name][key] for v in per_video])) for key in per_video[0][name]} for name in sources}
 
 

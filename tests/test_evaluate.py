@@ -53,3 +53,14 @@ def test_real_video_is_tracked_and_baselines_are_scored(tmp_path):
     scores = evaluate.score_video(video, evaluate.baselines(canonical), canonical, cache=tmp_path)
     assert abs(scores["static"]["lip_corr"]) < 1e-3 and scores["loudness"]["lip_corr"] > 0.2
     assert (tmp_path / "face_1.npz").is_file()
+
+
+def test_lip_opening_plot_is_drawn(tmp_path):
+    """A picture with one row per moving source; the static face has no row."""
+    import cv2
+
+    real = moving_face(50)[..., :2]
+    predicted = {"learned": moving_face(50, seed=1)[..., :2], "static": np.repeat(real[:1], 50, axis=0)}
+    evaluate.plot_openings("clip.mp4", real, predicted, 25.0, tmp_path / "clip.png")
+    picture = cv2.imread(str(tmp_path / "clip.png"))
+    assert picture.shape == (40 + 150, 1200, 3) and (picture < 128).any()
