@@ -150,9 +150,9 @@ def build_parser() -> argparse.ArgumentParser:
     train = commands.add_parser(
         "train",
         help="rebuild the lip-sync network: make the TTS corpus, label it, train, export ONNX (needs the train extra)",
-        description="Rebuild the shipped lip-sync model from scratch: synthesise and augment a speech corpus with local "
-        "TTS voices, align it with pocketsphinx and compute articulation targets, train the network, export ONNX. "
-        "Every stage resumes where it stopped.",
+        description="Rebuild the shipped lip-sync models from scratch: synthesise and augment a speech corpus with local "
+        "TTS voices, align it with pocketsphinx and compute articulation targets, train the network twice (the live "
+        "model hears 60 ms ahead, the model for files 300 ms), export ONNX. Every stage resumes where it stopped.",
     )
     train.add_argument("--corpus", type=Path, default=Path.home() / ".cache" / "puppet" / "corpus", help="corpus folder (default ~/.cache/puppet/corpus)")
     train.add_argument("--hours", type=float, default=3.5, help="hours of speech in the corpus (default 3.5)")
@@ -173,6 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--speech", type=Path, help="folder of real recordings with transcripts (NAME.wav + NAME.txt): what the mouth does on p/b/m, vowels, oo/ee and silence")
     evaluate.add_argument("--json", type=Path, help="also write the scores here")
     evaluate.add_argument("--plots", type=Path, metavar="DIR", help="also draw each video's lip opening over time, real against each source, as DIR/NAME.png")
+    evaluate.add_argument("-f", "--force", action="store_true", help="overwrite an existing --json file or --plots folder")
     evaluate.add_argument("--limit", type=int, default=200, help="held-out utterances scored at most (default 200)")
 
     bench = commands.add_parser("bench", help="measure rendering and export speed on this machine")
@@ -334,6 +335,10 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     if args.corpus is None and args.videos is None and args.speech is None:
         raise PuppetError("give --corpus DIR (held-out synthetic voices), --videos DIR (real talking videos) and/or --speech DIR (recordings with transcripts)")
+    if args.json and args.json.exists() and not args.force:
+        raise PuppetError(f"{args.json} exists; use --force to overwrite")
+    if args.plots and args.plots.is_dir() and any(args.plots.iterdir()) and not args.force:
+        raise PuppetError(f"{args.plots} is not empty; use --force to draw over its pictures")
     results = {}
     if args.corpus is not None:
         results["synthetic"] = score_corpus(args.corpus, args.limit)

@@ -161,3 +161,14 @@ def test_live_help_names_the_keys_to_obs_and_the_devices(capsys):
     out = capsys.readouterr().out
     for words in ("--virtual-camera", "--list-devices", "--audio", "--stats", "OBS"):
         assert words in out, words
+
+
+def test_eval_keeps_existing_results(files, capsys):
+    scores = put(files["dir"] / "scores.json", b"{}")
+    fails(capsys, ["eval", "--videos", files["dir"], "--json", scores], "use --force")
+    plots = files["dir"] / "plots"
+    plots.mkdir()
+    put(plots / "old.png", b"x")
+    fails(capsys, ["eval", "--videos", files["dir"], "--plots", plots], "use --force")
+    fails(capsys, ["eval", "--videos", files["dir"]], "no .mp4/.mov/.mkv videos")
+    assert scores.read_bytes() == b"{}" and (plots / "old.png").read_bytes() == b"x"
