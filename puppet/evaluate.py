@@ -165,10 +165,10 @@ def plot_openings(title: str, real: np.ndarray, predicted: dict[str, np.ndarray]
         base = margin + row * (i + 1) - 12
         cv2.line(picture, (10, base), (width - 10, base), (210, 210, 210), 1)
         for values, colour in ((truth, PLOT_COLOURS["real"]), (curve, PLOT_COLOURS.get(name, (120, 120, 120)))):
-            line = np.stack([x, base - values / top * (row - 30)], axis=1).round().astype(np.int32)
+            line = np.stack([x, base - values / top * (row - 44)], axis=1).round().astype(np.int32)
             cv2.polylines(picture, [line], False, colour, 2, cv2.LINE_AA)
         corr = metrics(predicted[name], real)["lip_corr"]
-        cv2.putText(picture, f"real (black) vs {name}: correlation {corr:.2f}", (14, base - row + 40),
+        cv2.putText(picture, f"real (black) vs {name}: correlation {corr:.2f}", (14, base - row + 26),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.55, PLOT_COLOURS.get(name, (120, 120, 120)), 1, cv2.LINE_AA)
     if not cv2.imwrite(str(out), picture):
         raise PuppetError(f"cannot write {out} (give a .png or .jpg path in an existing folder)")

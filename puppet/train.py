@@ -71,7 +71,7 @@ class TrainConfig:
     laplacian_weight: float = 1.0  # λ of Eq. 8 and 12 (paper: 1)
     rotation_weight: float = 10.0  # head rotation (radians²) against landmark positions (IOD², summed over 68)
     content_weight: float = 0.5  # the content branch alone must fit the targets too: it carries the mouth
-    velocity_weight: float = 0.0  # frame-to-frame velocity error (IOD² per frame, summed over 68) against positions
+    velocity_weight: float = 5.0  # frame-to-frame velocity error (IOD² per frame pair, summed over 68) against positions
     gan: bool = True  # train the speaker branch against the LSGAN discriminator of Eq. 10–12
     gan_weight: float = 0.01  # μ_s of Eq. 12
     grad_clip: float = 1.0
@@ -84,21 +84,16 @@ class TrainConfig:
     network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1))  # ignored when resuming
 
 
-# The two shipped models (puppet.predictor.MODEL_FILES): one recipe, two lookaheads. The live window
-# can wait only 60 ms for the future; a file is known whole, so its model hears the 300 ms the paper's
-# content window spans and can anticipate a rounding or a closure the way lips do.
-RECIPES = {
-    "streaming": {"lookahead": LOOKAHEAD, "velocity_weight": 0.0},
-    "offline": {"lookahead": 15, "velocity_weight": 0.0},
-}
+# The two shipped models (puppet.predictor.MODEL_FILES): one recipe, two lookaheads in motion frames.
+# The live window can wait only 60 ms for the future; a file is known whole, so its model hears the
+# 300 ms the paper's content window spans and can anticipate a rounding or a closure as lips do.
+LOOKAHEADS = {"streaming": LOOKAHEAD, "offline": 15}
 
 
 def recipe(kind: str, corpus: str, out: str) -> TrainConfig:
     """The TrainConfig that made the shipped `kind` model ("streaming" or "offline")."""
-    settings = RECIPES[kind]
     base = TrainConfig()
-    return replace(base, corpus=corpus, out=out, velocity_weight=settings["velocity_weight"],
-                   network=replace(base.network, lookahead=settings["lookahead"]))
+    return replace(base, corpus=corpus, out=out, network=replace(base.network, lookahead=LOOKAHEADS[kind]))
 
 
 # -- data ------------------------------------------------------------------------------------------
