@@ -81,6 +81,7 @@ class TrainConfig:
     export: bool = True  # write out/landmarks.onnx at the end, checked against torch
     feature_augment: bool = True  # recolour, re-level and band-mask each training window's log-mels (see augment_steps)
     silence_tails: float = 0.1  # share of training windows cut to silence part-way, the mouth easing to rest (see silence_tail)
+    tempo_changes: float = 0.0  # share of training windows sped up or slowed down, sound and motion alike (see stretched_window)
     network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1))  # ignored when resuming
 
 
@@ -181,17 +182,46 @@ def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: in
     }
     for b, index in enumerate(rng.choice(len(utterances), config.batch_size, p=lengths / lengths.sum())):
         u = utterances[index]
-        start = int(rng.integers(0, max(1, len(u.offsets) - frames + 1)))
-        n = min(frames, len(u.offsets) - start)
-        window = u.steps[start : start + n + lookahead]
+        rate = rng.uniform(*TEMPO_RANGE) if rng.random() < config.tempo_changes else 1.0
+        span = int(np.ceil(frames * rate))  # source frames the window covers
+        start = int(rng.integers(0, max(1, len(u.offsets) - span + 1)))
+        n = min(frames, int((len(u.offsets) - start) / rate))
+        window, offsets, rotation = stretched_window(u, start, n, lookahead, rate)
         batch["steps"][b, : n + lookahead] = augment_steps(window, rng) if config.feature_augment else window
         batch["speaker"][b] = u.speaker
-        batch["offsets"][b, :n] = u.offsets[start : start + n]
-        batch["rotation"][b, :n] = u.rotation[start : start + n]
+        batch["offsets"][b, :n] = offsets
+        batch["rotation"][b, :n] = rotation
         batch["mask"][b, :n] = 1.0
         if n > REST_FRAMES and rng.random() < config.silence_tails:
             silence_tail(batch["steps"][b], batch["offsets"][b], batch["rotation"][b], n, int(rng.integers(n // 4, n)))
     return {k: torch.from_numpy(v).to(config.device) for k, v in batch.items()}
+
+
+TEMPO_RANGE = (0.8, 1.5)  # speaking-rate factors of stretched windows (the corpus's own TTS tempo spans 0.85–1.2)
+
+
+def stretched_window(u: Utterance, start: int, frames: int, lookahead: int, rate: float):
+    """A window of `frames` motion frames from motion frame `start` of u, played `rate` times as fast
+    (rate 1: the window as it is): (steps (frames + L, 160), offsets (frames, 68, 3), rotation (frames, 3)).
+    Log-mel frames (100 per second) and motion frames (50) are resampled linearly on one time axis,
+    so a sound and the mouth that makes it stay together; pitch is kept, as in a tempo change."""
+    if rate == 1.0:
+        end = start + frames
+        return u.steps[start : end + lookahead], u.offsets[start:end], u.rotation[start:end]
+    mel = u.steps.reshape(-1, features.N_MELS)  # (2(T + L), 80), frame k centred at (k + 0.5) / 100 s
+    k = np.arange(2 * (frames + lookahead))
+    steps = _interpolate_rows(mel, 2 * start + (k + 0.5) * rate - 0.5).reshape(-1, N_STEP)
+    j = start + (np.arange(frames) + 0.5) * rate - 0.5  # motion frame j centred at (j + 0.5) / 50 s
+    return steps, _interpolate_rows(u.offsets, j), _interpolate_rows(u.rotation, j)
+
+
+def _interpolate_rows(array: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """array (N, ...) sampled at fractional row `positions` (clamped to the rows), linearly; float32."""
+    positions = np.clip(positions, 0, len(array) - 1)
+    low = np.floor(positions).astype(int)
+    high = np.minimum(low + 1, len(array) - 1)
+    weight = (positions - low).reshape(-1, *([1] * (array.ndim - 1)))
+    return ((1 - weight) * array[low] + weight * array[high]).astype(np.float32)
 
 
 # Feature-domain augmentation, drawn afresh for every training window (log10 mel units; 1 = 10 dB of power).
@@ -514,6 +544,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--no-feature-augment", action="store_true", help="train on the log-mels as they are (no recolouring, re-levelling, band masks)")
     parser.add_argument("--dropout", type=float, default=defaults.network.dropout, help=f"dropout between the content LSTM's layers (default {defaults.network.dropout})")
     parser.add_argument("--lookahead", type=int, default=defaults.network.lookahead, help=f"motion frames of future audio the network hears (default {defaults.network.lookahead}: 60 ms, for streaming; 15 = 300 ms, the paper's window, for offline rendering)")
+    parser.add_argument("--tempo-changes", type=float, default=defaults.tempo_changes, help=f"share of training windows sped up or slowed down ({TEMPO_RANGE[0]}–{TEMPO_RANGE[1]}×; default {defaults.tempo_changes})")
     parser.add_argument("--velocity-weight", type=float, default=defaults.velocity_weight, help=f"weight of the frame-to-frame velocity loss (default {defaults.velocity_weight})")
     parser.add_argument("--threads", type=int, default=defaults.threads)
     parser.add_argument("--device", default=defaults.device, help="torch device, e.g. cuda (default cpu)")
@@ -525,7 +556,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         corpus=args.corpus, out=args.out, steps=args.steps, batch_size=args.batch_size,
         sequence_frames=args.sequence_frames, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
         checkpoint_every=args.checkpoint_every, gan=not args.no_gan, threads=args.threads, device=args.device,
-        feature_augment=not args.no_feature_augment, velocity_weight=args.velocity_weight,
+        feature_augment=not args.no_feature_augment, velocity_weight=args.velocity_weight, tempo_changes=args.tempo_changes,
         network=NetworkConfig(dropout=args.dropout, lookahead=args.lookahead),
     )
 

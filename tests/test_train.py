@@ -184,3 +184,24 @@ def test_recipes_match_the_shipped_models(kind):
     config = recipe(kind, corpus="corpus", out="runs")
     assert Predictor(default_model(kind)).lookahead == config.network.lookahead
     assert config.network.lookahead * 1000 // features.MOTION_FPS <= (60 if kind == "streaming" else 300)
+
+
+def test_a_stretched_window_keeps_sound_and_mouth_together():
+    """A window played twice as fast: an event in the audio and its mouth pose land on the same
+    (halved) frame; rate 1 is the window itself."""
+    from puppet.predictor import SILENCE
+    from puppet.train import Utterance, stretched_window
+
+    frames, lookahead = 200, 3
+    steps = np.full((frames + lookahead, 160), SILENCE, np.float32)
+    offsets = np.zeros((frames, 68, 3), np.float32)
+    steps[120:130] = -1.0  # a loud burst at motion frames 120–129 …
+    offsets[120:130, 66, 1] = 0.3  # … with the mouth open
+    u = Utterance("a", "s", steps, offsets, np.zeros((frames, 3), np.float32), np.zeros(256, np.float32))
+    same = stretched_window(u, 20, 100, lookahead, 1.0)
+    np.testing.assert_array_equal(same[0], steps[20:123])
+    fast, mouth, rotation = stretched_window(u, 20, 60, lookahead, 2.0)
+    assert fast.shape == (63, 160) and mouth.shape == (60, 68, 3) and rotation.shape == (60, 3)
+    loud = np.flatnonzero(fast.max(axis=1) > -3)
+    open_ = np.flatnonzero(mouth[:, 66, 1] > 0.1)
+    assert abs(loud.mean() - 52) < 1 and abs(open_.mean() - 52) < 1 and abs(len(open_) - 5) <= 1  # (120 − 20) / 2 = 50 on
