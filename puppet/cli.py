@@ -339,6 +339,11 @@ def _evaluate(args: argparse.Namespace) -> int:
         raise PuppetError(f"{args.json} exists; use --force to overwrite")
     if args.plots and args.plots.is_dir() and any(args.plots.iterdir()) and not args.force:
         raise PuppetError(f"{args.plots} is not empty; use --force to draw over its pictures")
+    if args.plots:
+        try:
+            args.plots.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise PuppetError(f"cannot make the --plots folder {args.plots}: {error.strerror}") from None
     results = {}
     if args.corpus is not None:
         results["synthetic"] = score_corpus(args.corpus, args.limit)

@@ -171,4 +171,5 @@ def test_eval_keeps_existing_results(files, capsys):
     put(plots / "old.png", b"x")
     fails(capsys, ["eval", "--videos", files["dir"], "--plots", plots], "use --force")
     fails(capsys, ["eval", "--videos", files["dir"]], "no .mp4/.mov/.mkv videos")
+    fails(capsys, ["eval", "--videos", files["dir"], "--plots", scores / "plots"], "cannot make the --plots folder")
     assert scores.read_bytes() == b"{}" and (plots / "old.png").read_bytes() == b"x"
