@@ -142,7 +142,7 @@ def measure_predictor(seconds: float) -> dict:
     _, _, speech = bundle.demo_files()
     samples = audio.load(speech)
     embedding = speaker.embed(samples)
-    predictor, offline = Predictor(threads=1), Predictor(default_model("offline"), threads=1)
+    predictor, offline = Predictor(default_model("streaming"), threads=1), Predictor(default_model("offline"), threads=1)
     chunk = audio.ANALYSIS_RATE // 50  # 20 ms, one motion frame
 
     def stream_clip():

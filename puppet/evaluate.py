@@ -139,17 +139,20 @@ def score_video(path: Path, sources: dict[str, Source], canonical: np.ndarray, c
     """{source name: metrics} for one real video; canonical: (68, 3) canonical rest (IOD units).
     With `plot`, a picture of its lip opening is written there too (see plot_openings)."""
     real, predicted, fps = video_predictions(path, sources, canonical, cache)
+    scores = {name: metrics(points, real) for name, points in predicted.items()}
     if plot is not None:
-        plot_openings(path.name, real, predicted, fps, plot)
-    return {name: metrics(points, real) for name, points in predicted.items()}
+        plot_openings(path.name, real, predicted, {name: s["lip_corr"] for name, s in scores.items()}, fps, plot)
+    return scores
 
 
 PLOT_COLOURS = {"real": (20, 20, 20), "learned": (200, 90, 30), "learned-live": (230, 170, 90), "loudness": (60, 140, 230)}  # BGR
 
 
-def plot_openings(title: str, real: np.ndarray, predicted: dict[str, np.ndarray], fps: float, out: Path) -> None:
+def plot_openings(title: str, real: np.ndarray, predicted: dict[str, np.ndarray], correlations: dict[str, float],
+                  fps: float, out: Path) -> None:
     """A picture of a video's inner-lip opening over time, written to `out` (.png or .jpg): a row
-    per moving source, its curve over the real one. real, predicted: (T, 68, 2) as video_predictions."""
+    per moving source, its curve over the real one, labelled with its lip correlation.
+    real, predicted: (T, 68, 2) as video_predictions."""
     import cv2
 
     curves = {name: lip_opening(points) for name, points in predicted.items() if name != "static"}
@@ -167,8 +170,7 @@ def plot_openings(title: str, real: np.ndarray, predicted: dict[str, np.ndarray]
         for values, colour in ((truth, PLOT_COLOURS["real"]), (curve, PLOT_COLOURS.get(name, (120, 120, 120)))):
             line = np.stack([x, base - values / top * (row - 44)], axis=1).round().astype(np.int32)
             cv2.polylines(picture, [line], False, colour, 2, cv2.LINE_AA)
-        corr = metrics(predicted[name], real)["lip_corr"]
-        cv2.putText(picture, f"real (black) vs {name}: correlation {corr:.2f}", (14, base - row + 26),
+        cv2.putText(picture, f"real (black) vs {name}: correlation {correlations[name]:.2f}", (14, base - row + 26),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.55, PLOT_COLOURS.get(name, (120, 120, 120)), 1, cv2.LINE_AA)
     if not cv2.imwrite(str(out), picture):
         raise PuppetError(f"cannot write {out} (give a .png or .jpg path in an existing folder)")
@@ -209,8 +211,15 @@ def baselines(canonical: np.ndarray) -> dict[str, Source]:
 
     sources = {"static": static, "loudness": loudness}
     if lipsync.has_model():
+        heard = {"samples": None, "embedding": None}  # both networks score one clip after the other: embed it once
+
+        def embedding(samples):
+            if heard["samples"] is not samples:
+                heard.update(samples=samples, embedding=speaker.embed(samples))
+            return heard["embedding"]
+
         def learned(kind):
-            return lambda samples: lipsync.shipped_predictor(kind).predict(samples, speaker.embed(samples))
+            return lambda samples: lipsync.shipped_predictor(kind).predict(samples, embedding(samples))
 
         sources = {"learned": learned("offline"), "learned-live": learned("streaming"), **sources}
     return sources

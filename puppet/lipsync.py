@@ -18,7 +18,7 @@ from puppet.predictor import MODEL_FILES, Predictor, default_model
 
 
 @functools.cache
-def shipped_predictor(kind: str = "offline") -> Predictor:
+def shipped_predictor(kind: str) -> Predictor:
     """A trained model in assets/models, "offline" or "streaming", loaded once."""
     return Predictor(default_model(kind))
 
@@ -31,7 +31,7 @@ def has_model() -> bool:
 def learned_motion(samples: np.ndarray, rest: np.ndarray, fps: float, frames: int, predictor: Predictor | None = None) -> Motion:
     """Motion of `frames` frames at `fps` for (N,) float32 16 kHz speech on a face with (68, 3)
     rest landmarks (pixels): mouth and expression offsets and head rotation, no translation."""
-    predictor = predictor or shipped_predictor()
+    predictor = predictor or shipped_predictor("offline")
     offsets, rotation = predictor.predict(samples, speaker.embed(samples), SAMPLE_RATE)
     return Motion(
         offsets=from_face_units(resample(offsets, MOTION_FPS, fps, frames), rest),

@@ -32,7 +32,7 @@ CONTEXT_FRAMES = -(-(features.N_FFT // 2) // features.HOP)  # 2 frames of sample
 OFFLINE_CHUNK = 200  # motion steps per network run offline (4 s): attention cost grows with chunk², LSTM's not
 
 
-def default_model(kind: str = "streaming") -> Path:
+def default_model(kind: str) -> Path:
     """The trained model shipped with puppet: "streaming" (live) or "offline" (files)."""
     return Path(str(files("puppet.assets") / MODEL_FILES[kind]))
 
@@ -74,7 +74,7 @@ class Predictor:
     """An exported landmark network loaded for inference (one model, many clips and streams)."""
 
     def __init__(self, model_path: str | Path | None = None, threads: int = 1):
-        path = Path(model_path) if model_path is not None else default_model()
+        path = Path(model_path) if model_path is not None else default_model("streaming")
         if not path.exists():
             raise PuppetError(f"no landmark model at {path}: train one with `puppet train` or reinstall puppet")
         options = ort.SessionOptions()

@@ -85,8 +85,8 @@ class TrainConfig:
     network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1))  # ignored when resuming
 
 
-# The two shipped models (puppet.predictor.MODEL_FILES): one recipe, two lookaheads (motion frames).
-# The live window can wait only 60 ms for the future; a file is known whole, so its model hears the
+# The two shipped models (puppet.predictor.MODEL_FILES): TrainConfig's defaults with these changes
+# (lookahead in motion frames). The live window can wait only 60 ms for the future; a file is known whole, so its model hears the
 # 300 ms the paper's content window spans. Tempo changes helped the live model (fast speech, real
 # video) and not the offline one (assets/models/README.md), so only the live model trains with them.
 RECIPES = {"streaming": {"lookahead": LOOKAHEAD, "tempo_changes": 0.5}, "offline": {"lookahead": 15, "tempo_changes": 0.0}}

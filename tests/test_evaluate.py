@@ -61,6 +61,6 @@ def test_lip_opening_plot_is_drawn(tmp_path):
 
     real = moving_face(50)[..., :2]
     predicted = {"learned": moving_face(50, seed=1)[..., :2], "static": np.repeat(real[:1], 50, axis=0)}
-    evaluate.plot_openings("clip.mp4", real, predicted, 25.0, tmp_path / "clip.png")
+    evaluate.plot_openings("clip.mp4", real, predicted, {"learned": 0.5, "static": 0.0}, 25.0, tmp_path / "clip.png")
     picture = cv2.imread(str(tmp_path / "clip.png"))
     assert picture.shape == (40 + 150, 1200, 3) and (picture < 128).any()

@@ -44,7 +44,7 @@ def test_any_input_gives_bounded_motion(demo, demo_speech, kind):
         samples = resample_poly(speech, rate, 16000).astype(np.float32) if rate != 16000 else speech
         if kind == "stereo":
             samples = np.stack([samples, samples * 0.5], axis=1)
-        offsets, rotation = lipsync.shipped_predictor().predict(samples, np.full(256, 1 / 16, np.float32), rate)
+        offsets, rotation = lipsync.shipped_predictor("offline").predict(samples, np.full(256, 1 / 16, np.float32), rate)
         assert np.isfinite(offsets).all() and np.abs(offsets).max() < 1.0
         return
     opening(demo, samples)
