@@ -50,8 +50,15 @@ def parse_background(text: str):
     return Background(tuple(values + [1.0] * (4 - len(values))))
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse whose usage errors are one line (what was wrong, where to look), exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="puppet", description="Make any portrait talk: give it a picture and speech, get a talking puppet.")
+    parser = OneLineParser(prog="puppet", description="Make any portrait talk: give it a picture and speech, get a talking puppet.")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     render = commands.add_parser(

@@ -173,3 +173,10 @@ def test_eval_keeps_existing_results(files, capsys):
     fails(capsys, ["eval", "--videos", files["dir"]], "no .mp4/.mov/.mkv videos")
     fails(capsys, ["eval", "--videos", files["dir"], "--plots", scores / "plots"], "cannot make the --plots folder")
     assert scores.read_bytes() == b"{}" and (plots / "old.png").read_bytes() == b"x"
+
+
+def test_a_bad_option_is_one_line(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["render", "--demo", "-o", "x.mp4", "--fps", "fast"])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and len(err.splitlines()) == 1 and "--fps" in err and "--help" in err
