@@ -178,6 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--corpus", type=Path, help="corpus folder: its held-out speakers are scored")
     evaluate.add_argument("--videos", type=Path, help="folder of talking-face videos with speech (.mp4, .mov, .mkv)")
     evaluate.add_argument("--speech", type=Path, help="folder of real recordings with transcripts (NAME.wav + NAME.txt): what the mouth does on p/b/m, vowels, oo/ee and silence")
+    evaluate.add_argument("--labels", type=int, metavar="N", help="score the training labels themselves: N sentences by festival, the aligner's phones against festival's own times (needs festival)")
     evaluate.add_argument("--json", type=Path, help="also write the scores here")
     evaluate.add_argument("--plots", type=Path, metavar="DIR", help="also draw each video's lip opening over time, real against each source, as DIR/NAME.png")
     evaluate.add_argument("-f", "--force", action="store_true", help="overwrite an existing --json file or --plots folder")
@@ -338,10 +339,12 @@ def _train(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     import json
 
-    from puppet.evaluate import format_table, score_corpus, score_phones, score_videos
+    from puppet.evaluate import format_table, score_corpus, score_labels, score_phones, score_videos
 
-    if args.corpus is None and args.videos is None and args.speech is None:
-        raise PuppetError("give --corpus DIR (held-out synthetic voices), --videos DIR (real talking videos) and/or --speech DIR (recordings with transcripts)")
+    if args.corpus is None and args.videos is None and args.speech is None and args.labels is None:
+        raise PuppetError("give --corpus DIR (held-out synthetic voices), --videos DIR (real talking videos), --speech DIR (recordings with transcripts) and/or --labels N")
+    if args.labels is not None and args.labels < 1:
+        raise PuppetError("--labels needs a number of sentences, 1 or more")
     if args.json and args.json.exists() and not args.force:
         raise PuppetError(f"{args.json} exists; use --force to overwrite")
     if args.plots and args.plots.is_dir() and any(args.plots.iterdir()) and not args.force:
@@ -361,6 +364,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.speech is not None:
         results["speech"] = score_phones(args.speech)
         print(format_table(f"real recordings, mouth per sound ({args.speech})", results["speech"]))
+    if args.labels is not None:
+        results["labels"] = score_labels(args.labels)
+        print(format_table(f"training labels: aligned phones against festival's own ({args.labels} sentences)", results["labels"]["motion"]))
+        print("phone boundaries: median {median_ms:.0f} ms, 90th percentile {p90_ms:.0f} ms, {within_20ms:.0%} within 20 ms".format(**results["labels"]["boundaries"]))
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     return 0

@@ -46,6 +46,7 @@ from scipy import signal
 from tqdm import tqdm
 
 from puppet import audio, augment
+from puppet.alignment import SILENCE, Phone
 from puppet.errors import PuppetError
 
 RATE = augment.RATE  # Hz: 16 kHz, what the features and the aligner read
@@ -544,6 +545,39 @@ def piper_speech(text: str, length_scale: float) -> np.ndarray:
     rate = chunks[0].sample_rate
     g = np.gcd(rate, RATE)
     return signal.resample_poly(speech, RATE // g, rate // g).astype(np.float32)
+
+
+# festival's phone names (its "radio" set) that are not the aligner's ARPAbet: pause, schwas, flap, syllabic consonants
+FESTIVAL_PHONES = {"pau": SILENCE, "ax": "AH", "axr": "ER", "ix": "IH", "dx": "T", "el": "L", "em": "M", "en": "N", "nx": "N"}
+
+
+def festival_timed(voice: str, text: str) -> tuple[np.ndarray, list[Phone]]:
+    """Festival's voice `voice` saying `text`: ((N,) float32 speech at RATE, the phones it spoke at
+    the times it placed them, tiling [0, N / RATE] seconds). The synthesizer's own segment times are
+    the truth an aligner's phones can be measured against."""
+    with tempfile.TemporaryDirectory() as tmp:
+        segments, wav, script = Path(tmp) / "segments", Path(tmp) / "speech.wav", Path(tmp) / "say.scm"
+        script.write_text(f"(voice_{voice})\n(set! u (utt.synth (Utterance Text {json.dumps(text)})))\n"
+                          f'(utt.save.segs u "{segments}")\n(utt.save.wave u "{wav}")\n', encoding="utf-8")
+        subprocess.run(["festival", "--batch", str(script)], check=True, capture_output=True)
+        speech = audio.load(wav, RATE)
+        rows = [line.split() for line in segments.read_text().splitlines() if line.strip() and not line.startswith("#")]
+    duration, phones, start = len(speech) / RATE, [], 0.0
+    for end, _, name in rows:
+        end = min(float(end), duration)
+        if end > start:
+            phones.append(Phone(FESTIVAL_PHONES.get(name, name.upper()), start, end))
+            start = end
+    if start < duration:
+        phones.append(Phone(SILENCE, start, duration))
+    return speech, phones
+
+
+def sample_texts(n: int, seed: int = 0) -> list[str]:
+    """n sentences drawn as the corpus draws its texts, each kind of TEXT_KINDS in turn."""
+    rng = np.random.default_rng([seed, 2])
+    texts = TextSource(rng)
+    return [texts.sentence(TEXT_KINDS[i % len(TEXT_KINDS)], rng) for i in range(n)]
 
 
 def trim(samples: np.ndarray) -> np.ndarray:

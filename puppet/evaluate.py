@@ -310,6 +310,37 @@ def score_phones(folder: Path) -> dict:
     }
 
 
+def score_labels(sentences: int, voices: tuple[str, ...] = ("kal_diphone", "cmu_us_slt_arctic_hts")) -> dict:
+    """How exact the training labels are: festival says corpus-like sentences (its voices in turn),
+    and the mouth motion made from puppet's aligned phones is scored against the motion made from the
+    phones at festival's own times, the truth. For scale, "1 frame late" is that truth 20 ms late.
+    Also the phone boundaries' errors: for each true boundary, the nearest aligned one (ms)."""
+    from puppet.alignment import align
+    from puppet.corpus import engine_available, festival_has, festival_timed, sample_texts
+    from puppet.visemes import canonical_rest, mouth_motion
+
+    voices = tuple(v for v in voices if engine_available("festival") and festival_has(v))
+    if not voices:
+        raise PuppetError("scoring the labels needs festival and its voice kal_diphone or cmu_us_slt_arctic_hts "
+                          "(apt-get install festival festvox-kallpc16k festvox-us-slt-hts)")
+    canonical = canonical_rest()
+    scores: dict[str, list[dict]] = {"aligned": [], "1 frame late": []}
+    errors = []
+    for i, text in enumerate(sample_texts(sentences)):
+        samples, truth = festival_timed(voices[i % len(voices)], text)
+        aligned = align(samples, text)
+        frames = motion_frame_count(len(samples))
+        reference = canonical[None] + mouth_motion(truth, frames)
+        scores["aligned"].append(metrics(canonical[None] + mouth_motion(aligned, frames), reference))
+        scores["1 frame late"].append(metrics(np.concatenate([reference[:1], reference[:-1]]), reference))
+        starts = np.array([p.start for p in aligned[1:]])
+        errors += [1000 * np.abs(starts - p.start).min() for p in truth[1:]]
+    table = {name: {key: float(np.mean([s[key] for s in runs])) for key in runs[0]} for name, runs in scores.items()}
+    boundaries = {"median_ms": float(np.median(errors)), "p90_ms": float(np.percentile(errors, 90)),
+                  "within_20ms": float(np.mean(np.array(errors) <= 20))}
+    return {"motion": table, "boundaries": boundaries}
+
+
 def format_table(title: str, scores: dict) -> str:
     """A plain-text table of {source: {metric: value}}."""
     keys = list(next(iter(scores.values())))

@@ -172,6 +172,8 @@ def test_eval_keeps_existing_results(files, capsys):
     fails(capsys, ["eval", "--videos", files["dir"], "--plots", plots], "use --force")
     fails(capsys, ["eval", "--videos", files["dir"]], "no .mp4/.mov/.mkv videos")
     fails(capsys, ["eval", "--videos", files["dir"], "--plots", scores / "plots"], "cannot make the --plots folder")
+    fails(capsys, ["eval", "--labels", "0"], "1 or more")
+    fails(capsys, ["eval"], "--labels N")
     assert scores.read_bytes() == b"{}" and (plots / "old.png").read_bytes() == b"x"
 
 

@@ -11,6 +11,7 @@ import pytest
 pytest.importorskip("pocketsphinx")
 
 from puppet import corpus
+from puppet.alignment import PHONES, SILENCE
 from puppet.corpus import CorpusOptions, Voice
 
 TRAIN_VOICE = Voice("espeak-ng", "en-us")
@@ -138,3 +139,19 @@ def test_same_seed_builds_the_same_corpus_whatever_the_jobs(tiny, tmp_path):
     assert sorted(p.stem for p in (again / "clean").iterdir()) == [e["id"] for e in second]  # none rendered ahead left
     name = f"{first[0]['id']}.wav"
     np.testing.assert_array_equal(read_wav(folder / "audio" / name), read_wav(again / "audio" / name))
+
+
+def test_festival_gives_its_own_phone_times_tiling_its_speech():
+    if not (corpus.engine_available("festival") and corpus.festival_has("kal_diphone")):
+        pytest.skip("festival's kal_diphone voice is not installed")
+    samples, phones = corpus.festival_timed("kal_diphone", "Bob met my mother by the pool.")
+    duration = len(samples) / corpus.RATE
+    assert duration > 1.0 and phones[0].start == 0.0 and phones[-1].end == pytest.approx(duration)
+    assert all(a.end == b.start for a, b in pairwise(phones))
+    assert {p.phone for p in phones} <= set(PHONES) | {SILENCE}
+    assert [p.phone for p in phones if p.phone != SILENCE][:3] == ["B", "AA", "B"]
+
+
+def test_sample_texts_are_corpus_sentences_of_every_kind():
+    texts = corpus.sample_texts(8)
+    assert len(set(texts)) == 8 and texts == corpus.sample_texts(8) and texts != corpus.sample_texts(8, seed=1)

@@ -64,3 +64,16 @@ def test_lip_opening_plot_is_drawn(tmp_path):
     evaluate.plot_openings("clip.mp4", real, predicted, {"learned": 0.5, "static": 0.0}, 25.0, tmp_path / "clip.png")
     picture = cv2.imread(str(tmp_path / "clip.png"))
     assert picture.shape == (40 + 150, 1200, 3) and (picture < 128).any()
+
+
+def test_training_labels_are_scored_against_festivals_own_phone_times():
+    pytest.importorskip("pocketsphinx")
+    from puppet import corpus
+
+    if not (corpus.engine_available("festival") and corpus.festival_has("kal_diphone")):
+        pytest.skip("festival's kal_diphone voice is not installed")
+    scores = evaluate.score_labels(3, voices=("kal_diphone",))
+    aligned, late = scores["motion"]["aligned"], scores["motion"]["1 frame late"]
+    assert scores["boundaries"]["median_ms"] <= 20 and scores["boundaries"]["within_20ms"] > 0.6
+    assert aligned["D-A"] < 6 and aligned["lip_corr"] > 0.9
+    assert 0 < late["D-LL"] and late["lip_corr"] < 1
