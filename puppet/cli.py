@@ -339,7 +339,13 @@ def _train(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     import json
 
-    from puppet.evaluate import format_table, score_corpus, score_labels, score_phones, score_videos
+    from puppet.evaluate import (
+        format_table,
+        score_corpus,
+        score_labels,
+        score_phones,
+        score_videos,
+    )
 
     if args.corpus is None and args.videos is None and args.speech is None and args.labels is None:
         raise PuppetError("give --corpus DIR (held-out synthetic voices), --videos DIR (real talking videos), --speech DIR (recordings with transcripts) and/or --labels N")

@@ -316,7 +316,12 @@ def score_labels(sentences: int, voices: tuple[str, ...] = ("kal_diphone", "cmu_
     phones at festival's own times, the truth. For scale, "1 frame late" is that truth 20 ms late.
     Also the phone boundaries' errors: for each true boundary, the nearest aligned one (ms)."""
     from puppet.alignment import align
-    from puppet.corpus import engine_available, festival_has, festival_timed, sample_texts
+    from puppet.corpus import (
+        engine_available,
+        festival_has,
+        festival_timed,
+        sample_texts,
+    )
     from puppet.visemes import canonical_rest, mouth_motion
 
     voices = tuple(v for v in voices if engine_available("festival") and festival_has(v))
