@@ -162,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
         "model hears 60 ms ahead, the model for files 300 ms), export ONNX. Every stage resumes where it stopped.",
     )
     train.add_argument("--corpus", type=Path, default=Path.home() / ".cache" / "puppet" / "corpus", help="corpus folder (default ~/.cache/puppet/corpus)")
-    train.add_argument("--hours", type=float, default=3.5, help="hours of speech in the corpus (default 3.5)")
+    train.add_argument("--hours", type=float, default=6.0, help="hours of speech in the corpus (default 6)")
     train.add_argument("--out", type=Path, default=Path("runs") / "landmarks", help="checkpoints, logs and ONNX models, in OUT/streaming and OUT/offline (default runs/landmarks)")
     train.add_argument("--model", choices=["both", "streaming", "offline"], default="both", help="which model to train: the live one (hears 60 ms ahead), the one for files (300 ms), or both (default)")
     train.add_argument("--steps", type=int, help="training steps (default: the training config's)")
