@@ -19,6 +19,9 @@ Metrics (lower is better, except the correlation):
 - D-L / D-V: the same as D-LL / D-VL over all 68 landmarks, as a percentage of the face width;
 - D-Rot: mean head-rotation difference in degrees (synthetic voices only, where it is known);
 - lip correlation: Pearson correlation of predicted and real inner-lip opening.
+
+`score_labels` turns the same metrics on the training labels themselves: motion made from the
+aligner's phones against motion made from the phones at the synthesizer's own times.
 """
 import json
 from pathlib import Path
