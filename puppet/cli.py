@@ -1,5 +1,6 @@
 """The `puppet` command: argument parsing and the one place errors become one-line messages."""
 import argparse
+import importlib.util
 import os
 import sys
 from dataclasses import replace
@@ -351,6 +352,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         raise PuppetError("give --corpus DIR (held-out synthetic voices), --videos DIR (real talking videos), --speech DIR (recordings with transcripts) and/or --labels N")
     if args.labels is not None and args.labels < 1:
         raise PuppetError("--labels needs a number of sentences, 1 or more")
+    if (args.speech is not None or args.labels is not None) and importlib.util.find_spec("pocketsphinx") is None:
+        raise PuppetError("--speech and --labels align phones with pocketsphinx, in the train extra: pip install 'puppet[train]'")
     if args.json and args.json.exists() and not args.force:
         raise PuppetError(f"{args.json} exists; use --force to overwrite")
     if args.plots and args.plots.is_dir() and any(args.plots.iterdir()) and not args.force:

@@ -1,4 +1,5 @@
 """The `puppet` command as a user meets it: bad input ends in one line and exit 2, nothing left behind."""
+import importlib.util
 import wave
 
 import cv2
@@ -182,3 +183,9 @@ def test_a_bad_option_is_one_line(capsys):
         main(["render", "--demo", "-o", "x.mp4", "--fps", "fast"])
     err = capsys.readouterr().err.strip()
     assert exit_.value.code == 2 and len(err.splitlines()) == 1 and "--fps" in err and "--help" in err
+
+
+def test_eval_without_the_aligner_names_the_extra(capsys, monkeypatch):
+    find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "pocketsphinx" else find_spec(name, *a))
+    fails(capsys, ["eval", "--labels", "3"], "puppet[train]")
