@@ -200,9 +200,10 @@ def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sour
 
 
 def baselines(canonical: np.ndarray) -> dict[str, Source]:
-    """The sources every run scores: the learned networks (when this install has them: "learned" is the
-    offline model files are rendered with, "learned-live" the streaming one), the loudness baseline
-    and a static face; each maps 16 kHz speech to (offsets (T, 68, 3), rotation (T, 3) | None)."""
+    """The sources every run scores: the learned networks as files get them, at rest in pauses (when this
+    install has them: "learned" is the offline model files are rendered with, "learned-live" the
+    streaming one), the loudness baseline and a static face; each maps 16 kHz speech to
+    (offsets (T, 68, 3), rotation (T, 3) | None)."""
     from puppet import lipsync, speaker
     from puppet.loudness import loudness_motion
 
@@ -222,7 +223,7 @@ def baselines(canonical: np.ndarray) -> dict[str, Source]:
             return heard["embedding"]
 
         def learned(kind):
-            return lambda samples: lipsync.shipped_predictor(kind).predict(samples, embedding(samples))
+            return lambda samples: lipsync.speech_offsets(samples, lipsync.shipped_predictor(kind), embedding(samples))
 
         sources = {"learned": learned("offline"), "learned-live": learned("streaming"), **sources}
     return sources

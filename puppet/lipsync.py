@@ -5,13 +5,20 @@ gives landmark offsets in face units at MOTION_FPS plus a head rotation; here th
 turned onto the portrait's own face (q + Δq, as in MakeItTalk) and resampled to the video's rate.
 Files use the offline model, which hears 300 ms ahead (the paper's content window); the live
 window uses the streaming one, which hears 60 ms ahead.
+
+Pauses. The network rests the mouth in digital silence, but a real recording's pauses hold room tone,
+hiss and breath, over which it leaves the lips a little apart. A file is known whole, so its pauses are
+found from its own levels (the live window has its noise gate instead, puppet.live.VoiceGate): a run of
+at least PAUSE_SECONDS whose 20 ms frames all lie PAUSE_BELOW_DB under the recording's loud speech
+(its SPEECH_PERCENTILE frame) is a pause, and the mouth and brows ease to rest inside it over
+PAUSE_EASE_SECONDS from each end, head motion untouched.
 """
 import functools
 
 import numpy as np
 
 from puppet import speaker
-from puppet.features import MOTION_FPS, SAMPLE_RATE
+from puppet.features import MOTION_FPS, SAMPLE_RATE, motion_frame_count
 from puppet.landmarks import from_face_units
 from puppet.motion import Motion, resample
 from puppet.predictor import MODEL_FILES, Predictor, default_model
@@ -28,11 +35,44 @@ def has_model() -> bool:
     return all(default_model(kind).is_file() for kind in MODEL_FILES)
 
 
+PAUSE_SECONDS = 0.3  # quiet runs shorter than this (stop closures, breaths between words) are speech
+PAUSE_BELOW_DB = 20.0  # a frame this far under the loud speech level is quiet
+SPEECH_PERCENTILE = 98  # the recording's loud speech level: this percentile of its frame levels
+PAUSE_EASE_SECONDS = 0.1  # inside a pause, the offsets fade to rest over this from each end
+
+
+def pause_weights(samples: np.ndarray) -> np.ndarray:
+    """(T,) float32 in [0, 1] per motion frame of (N,) float32 16 kHz mono speech (T = motion_frame_count(N)):
+    1 while speaking, easing to 0 inside pauses (see the module docstring)."""
+    frames = motion_frame_count(len(samples))
+    step = int(SAMPLE_RATE // MOTION_FPS)  # 320 samples, 20 ms
+    padded = np.zeros(frames * step, np.float32)
+    padded[: len(samples)] = samples[: len(padded)]
+    level = 10 * np.log10(np.mean(padded.reshape(frames, step) ** 2, axis=1) + 1e-12)  # dBFS per frame
+    quiet = np.r_[False, level < np.percentile(level, SPEECH_PERCENTILE) - PAUSE_BELOW_DB, False]
+    edges = np.flatnonzero(quiet[1:] != quiet[:-1]).reshape(-1, 2)  # [start, end) of each quiet run
+    weights = np.ones(frames, np.float32)
+    ease = PAUSE_EASE_SECONDS * MOTION_FPS
+    for start, end in edges:
+        if end - start >= PAUSE_SECONDS * MOTION_FPS:
+            t = np.arange(start, end)
+            weights[start:end] = 1.0 - np.clip(np.minimum(t - start, end - 1 - t) / ease, 0.0, 1.0)
+    return weights
+
+
+def speech_offsets(samples: np.ndarray, predictor: Predictor, embedding: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The network's answer for (N,) float32 16 kHz mono speech, at rest in its pauses: canonical
+    offsets (T, 68, 3) in face units and head rotation (T, 3) radians, at MOTION_FPS. embedding: the
+    voice's (256,) speaker embedding when already known."""
+    embedding = speaker.embed(samples) if embedding is None else embedding
+    offsets, rotation = predictor.predict(samples, embedding, SAMPLE_RATE)
+    return offsets * pause_weights(samples)[:, None, None], rotation
+
+
 def learned_motion(samples: np.ndarray, rest: np.ndarray, fps: float, frames: int, predictor: Predictor | None = None) -> Motion:
     """Motion of `frames` frames at `fps` for (N,) float32 16 kHz speech on a face with (68, 3)
     rest landmarks (pixels): mouth and expression offsets and head rotation, no translation."""
-    predictor = predictor or shipped_predictor("offline")
-    offsets, rotation = predictor.predict(samples, speaker.embed(samples), SAMPLE_RATE)
+    offsets, rotation = speech_offsets(samples, predictor or shipped_predictor("offline"))
     return Motion(
         offsets=from_face_units(resample(offsets, MOTION_FPS, fps, frames), rest),
         rotation=resample(rotation, MOTION_FPS, fps, frames),

@@ -60,6 +60,7 @@ class NetworkConfig:
     lookahead: int = LOOKAHEAD  # output step t is motion frame t − lookahead
     offset_limit: float = 1.0  # |offset| stays below this (inter-ocular distances): outputs are bounded
     rotation_limit: float = 0.8  # |rotation| stays below this (radians, ~46°)
+    phone_classes: int = 0  # > 0: a linear phone classifier on LSTM_c's output, for training only (not exported)
 
 
 class State(NamedTuple):
@@ -80,7 +81,8 @@ class State(NamedTuple):
 class Output(NamedTuple):
     """One run over T steps. offsets (B, T, 68, 3) and rotation (B, T, 3) are the network's answer;
     content (B, T, 204) raw content offsets Δq, expression (B, T, 204) raw Δp, code (B, T, content_code)
-    c̃ and speaker (B, speaker_reduced) are exposed for the training losses."""
+    c̃, speaker (B, speaker_reduced) and phones (B, T, phone_classes) logits, or None without a phone
+    classifier, are exposed for the training losses."""
 
     offsets: torch.Tensor
     rotation: torch.Tensor
@@ -89,6 +91,7 @@ class Output(NamedTuple):
     expression: torch.Tensor
     code: torch.Tensor
     speaker: torch.Tensor
+    phones: torch.Tensor | None
 
 
 def mlp(sizes: list[int]) -> nn.Sequential:
@@ -153,6 +156,9 @@ class Network(nn.Module):
         self.content_lstm = nn.LSTM(N_INPUT, config.content_hidden, config.content_layers, batch_first=True, dropout=config.dropout)
         self.content_mlp = mlp([config.content_hidden, *config.content_mlp, N_OFFSETS])
         self.content_code = nn.Linear(config.content_hidden, config.content_code)
+        # Not in MakeItTalk: naming the phone being spoken (an auxiliary loss in training) pushes LSTM_c
+        # towards what a mouth shape depends on and away from the voice that says it.
+        self.phone_head = nn.Linear(config.content_hidden, config.phone_classes) if config.phone_classes else None
         self.speaker_reduce = nn.Sequential(nn.Linear(SPEAKER_DIM, config.speaker_reduced), nn.LeakyReLU(0.2))
         self.embed = nn.Linear(config.content_code + config.speaker_reduced, config.d_model)
         self.attention = nn.ModuleList(
@@ -200,7 +206,8 @@ class Network(nn.Module):
         expression = speaker_out[..., N_ROTATION:]
         offsets = soft_limit(content + expression, self.config.offset_limit)
         offsets = offsets.view(*offsets.shape[:2], N_LANDMARKS, 3)
-        return Output(offsets, rotation, State(h, c, torch.stack(pasts), valid), content, expression, code, speaker_code)
+        phones = self.phone_head(hidden) if self.phone_head is not None else None
+        return Output(offsets, rotation, State(h, c, torch.stack(pasts), valid), content, expression, code, speaker_code, phones)
 
     def forward(self, steps, speaker, h, c, past, valid):
         """The exported signature: flat tensors in, (offsets, rotation, h, c, past, valid) out."""
@@ -290,6 +297,13 @@ def lsgan_losses(real: torch.Tensor, fake: torch.Tensor, mask: torch.Tensor) -> 
 def lsgan_generator_loss(fake: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     """The adversarial term of Eq. 12: Σ_t (r_t − 1)², averaged over masked frames."""
     return ((fake - 1).square() * mask).sum() / mask.sum().clamp(min=1.0)
+
+
+def phone_loss(logits: torch.Tensor, phones: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Cross-entropy of the phone classifier, averaged over masked frames. logits (B, T, K); phones (B, T)
+    int64 class of each frame; mask (B, T). (Not in MakeItTalk: an auxiliary task for LSTM_c.)"""
+    per_frame = nn.functional.cross_entropy(logits.transpose(1, 2), phones, reduction="none")
+    return (per_frame * mask).sum() / mask.sum().clamp(min=1.0)
 
 
 def parameter_count(module: nn.Module) -> int:

@@ -9,6 +9,8 @@ optimizers, evaluation, the loop, export. The corpus folder (built by puppet.cor
     targets/ID.npz      offsets (T, 68, 3) float32 IOD units from the canonical face, head frame;
                         rotation (T, 3) float32 radians (pitch, yaw, roll); fps = 50;
                         T = features.motion_frame_count(samples)
+    phones/ID.json      the aligned phones the targets were made from (puppet.labels): the phone
+                        classifier's labels
     embeddings/ID.npy   (256,) float32 speaker embedding, computed here with puppet.speaker.embed and
                         cached when missing
 Only ids with targets are used (labelling may still be running); held-out speakers are never
@@ -30,6 +32,8 @@ import numpy as np
 import torch
 
 from puppet import features
+from puppet.alignment import PHONES
+from puppet.alignment import SILENCE as SILENT_PHONE
 from puppet.errors import PuppetError
 from puppet.network import (
     LOOKAHEAD,
@@ -41,6 +45,7 @@ from puppet.network import (
     lsgan_generator_loss,
     lsgan_losses,
     parameter_count,
+    phone_loss,
     position_loss,
     soft_limit,
     velocity_loss,
@@ -52,6 +57,7 @@ CHECKPOINT = "checkpoint.pt"
 LOG = "log.jsonl"
 ONNX_FILE = "landmarks.onnx"
 EXPORT_TOLERANCE = 1e-4  # onnxruntime vs torch, absolute, on every output
+PHONE_CLASSES = (SILENT_PHONE, *PHONES)  # the phone classifier's classes, in order
 
 
 @dataclass(frozen=True)
@@ -82,7 +88,8 @@ class TrainConfig:
     feature_augment: bool = True  # recolour, re-level and band-mask each training window's log-mels (see augment_steps)
     silence_tails: float = 0.1  # share of training windows cut to silence part-way, the mouth easing to rest (see silence_tail)
     tempo_changes: float = 0.0  # share of training windows sped up or slowed down, sound and motion alike (see stretched_window)
-    network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1))  # ignored when resuming
+    phone_weight: float = 0.02  # the phone classifier's cross-entropy (nats per frame) against positions; 0: none
+    network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1, phone_classes=len(PHONE_CLASSES)))  # ignored when resuming
 
 
 # The two shipped models (puppet.predictor.MODEL_FILES): TrainConfig's defaults with these changes
@@ -106,7 +113,7 @@ def recipe(kind: str, corpus: str, out: str) -> TrainConfig:
 class Utterance:
     """One labelled utterance, ready for training (T motion frames, L = lookahead).
     steps (T + L, 160) float32 log-mels, silence after the end; offsets (T, 68, 3); rotation (T, 3);
-    speaker (256,) float32 unit-norm embedding."""
+    speaker (256,) float32 unit-norm embedding; phones (T,) int64 index into PHONE_CLASSES of each frame."""
 
     id: str
     speaker_id: str
@@ -114,6 +121,7 @@ class Utterance:
     offsets: np.ndarray
     rotation: np.ndarray
     speaker: np.ndarray
+    phones: np.ndarray
 
 
 def read_wav(path: Path) -> np.ndarray:
@@ -140,6 +148,15 @@ def speaker_embedding(corpus: Path, utterance_id: str, samples: np.ndarray) -> n
     return embedding
 
 
+def frame_phones(rows: list[dict], frames: int) -> np.ndarray:
+    """(frames,) int64 index into PHONE_CLASSES of the phone spoken at each motion frame's centre, from
+    phones/ID.json rows ({"phone", "start", "end"} in seconds, tiling the audio); silence past the last."""
+    centres = (np.arange(frames) + 0.5) / features.MOTION_FPS
+    ends = np.array([row["end"] for row in rows])
+    classes = np.array([PHONE_CLASSES.index(row["phone"]) for row in rows] + [0], np.int64)
+    return classes[np.searchsorted(ends, centres, side="right")]
+
+
 def load_corpus(corpus: Path, lookahead: int) -> tuple[list[Utterance], list[Utterance]]:
     """(training utterances, held-out utterances) among the manifest's ids that have targets."""
     manifest = corpus / "manifest.jsonl"
@@ -158,10 +175,11 @@ def load_corpus(corpus: Path, lookahead: int) -> tuple[list[Utterance], list[Utt
         frames = features.motion_frame_count(len(samples))
         if target["offsets"].shape != (frames, N_LANDMARKS, 3) or target["rotation"].shape != (frames, 3):
             raise PuppetError(f"{target_path}: expected {frames} frames of offsets (T, 68, 3) and rotation (T, 3)")
+        phones = json.loads((corpus / "phones" / f"{entry['id']}.json").read_text())
         utterance = Utterance(
             entry["id"], str(entry["speaker"]), audio_steps(samples, lookahead),
             target["offsets"].astype(np.float32), target["rotation"].astype(np.float32),
-            speaker_embedding(corpus, entry["id"], samples),
+            speaker_embedding(corpus, entry["id"], samples), frame_phones(phones, frames),
         )
         (heldout if entry.get("heldout") else train).append(utterance)
     if not train:
@@ -171,7 +189,7 @@ def load_corpus(corpus: Path, lookahead: int) -> tuple[list[Utterance], list[Utt
 
 def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: int, rng: np.random.Generator) -> dict:
     """A batch of random windows, utterances drawn in proportion to their length:
-    steps (B, S + L, 160), speaker (B, 256), offsets (B, S, 68, 3), rotation (B, S, 3), mask (B, S),
+    steps (B, S + L, 160), speaker (B, 256), offsets (B, S, 68, 3), rotation (B, S, 3), phones (B, S), mask (B, S),
     where network output step L + i is target frame i (S = sequence_frames, L = lookahead)."""
     frames = config.sequence_frames
     lengths = np.array([len(u.offsets) for u in utterances], np.float64)
@@ -180,6 +198,7 @@ def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: in
         "speaker": np.zeros((config.batch_size, 256), np.float32),
         "offsets": np.zeros((config.batch_size, frames, N_LANDMARKS, 3), np.float32),
         "rotation": np.zeros((config.batch_size, frames, 3), np.float32),
+        "phones": np.zeros((config.batch_size, frames), np.int64),
         "mask": np.zeros((config.batch_size, frames), np.float32),
     }
     for b, index in enumerate(rng.choice(len(utterances), config.batch_size, p=lengths / lengths.sum())):
@@ -188,14 +207,17 @@ def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: in
         span = int(np.ceil(frames * rate))  # source frames the window covers
         start = int(rng.integers(0, max(1, len(u.offsets) - span + 1)))
         n = min(frames, int((len(u.offsets) - start) / rate))
-        window, offsets, rotation = stretched_window(u, start, n, lookahead, rate)
+        window, offsets, rotation, phones = stretched_window(u, start, n, lookahead, rate)
         batch["steps"][b, : n + lookahead] = augment_steps(window, rng) if config.feature_augment else window
         batch["speaker"][b] = u.speaker
         batch["offsets"][b, :n] = offsets
         batch["rotation"][b, :n] = rotation
+        batch["phones"][b, :n] = phones
         batch["mask"][b, :n] = 1.0
         if n > REST_FRAMES and rng.random() < config.silence_tails:
-            silence_tail(batch["steps"][b], batch["offsets"][b], batch["rotation"][b], n, int(rng.integers(n // 4, n)))
+            cut = int(rng.integers(n // 4, n))
+            silence_tail(batch["steps"][b], batch["offsets"][b], batch["rotation"][b], n, cut)
+            batch["phones"][b, cut:] = 0  # silence
     return {k: torch.from_numpy(v).to(config.device) for k, v in batch.items()}
 
 
@@ -204,17 +226,19 @@ TEMPO_RANGE = (0.8, 1.5)  # speaking-rate factors of stretched windows (the corp
 
 def stretched_window(u: Utterance, start: int, frames: int, lookahead: int, rate: float):
     """A window of `frames` motion frames from motion frame `start` of u, played `rate` times as fast
-    (rate 1: the window as it is): (steps (frames + L, 160), offsets (frames, 68, 3), rotation (frames, 3)).
-    Log-mel frames (100 per second) and motion frames (50) are resampled linearly on one time axis,
-    so a sound and the mouth that makes it stay together; pitch is kept, as in a tempo change."""
+    (rate 1: the window as it is): (steps (frames + L, 160), offsets (frames, 68, 3), rotation (frames, 3),
+    phones (frames,)). Log-mel frames (100 per second) and motion frames (50) are resampled linearly on one
+    time axis (phones: the nearest frame's), so a sound and the mouth that makes it stay together; pitch is
+    kept, as in a tempo change."""
     if rate == 1.0:
         end = start + frames
-        return u.steps[start : end + lookahead], u.offsets[start:end], u.rotation[start:end]
+        return u.steps[start : end + lookahead], u.offsets[start:end], u.rotation[start:end], u.phones[start:end]
     mel = u.steps.reshape(-1, features.N_MELS)  # (2(T + L), 80), frame k centred at (k + 0.5) / 100 s
     k = np.arange(2 * (frames + lookahead))
     steps = _interpolate_rows(mel, 2 * start + (k + 0.5) * rate - 0.5).reshape(-1, N_STEP)
     j = start + (np.arange(frames) + 0.5) * rate - 0.5  # motion frame j centred at (j + 0.5) / 50 s
-    return steps, _interpolate_rows(u.offsets, j), _interpolate_rows(u.rotation, j)
+    phones = u.phones[np.clip(np.rint(j).astype(int), 0, len(u.phones) - 1)]
+    return steps, _interpolate_rows(u.offsets, j), _interpolate_rows(u.rotation, j), phones
 
 
 def _interpolate_rows(array: np.ndarray, positions: np.ndarray) -> np.ndarray:
@@ -292,6 +316,11 @@ def generator_losses(model: Network, batch: dict, config: TrainConfig, discrimin
         + config.content_weight * (terms["content_position"] + config.laplacian_weight * terms["content_laplacian"])
         + config.velocity_weight * terms["velocity"]
     )
+    if out.phones is not None and config.phone_weight > 0:
+        logits = out.phones[:, lookahead:]
+        terms["phone"] = phone_loss(logits, batch["phones"], mask)
+        terms["phone_accuracy"] = ((logits.argmax(-1) == batch["phones"]).float() * mask).sum() / mask.sum().clamp(min=1.0)
+        total = total + config.phone_weight * terms["phone"]
     fake = None
     if discriminator is not None:
         # The adversarial gradient reaches only the speaker branch (rotation and expression), as in §4.2.
@@ -322,7 +351,7 @@ def evaluate(model: Network, utterances: list[Utterance], config: TrainConfig) -
         frames = len(u.offsets)
         batch = {
             "steps": u.steps[None], "speaker": u.speaker[None], "offsets": u.offsets[None],
-            "rotation": u.rotation[None], "mask": np.ones((1, frames), np.float32),
+            "rotation": u.rotation[None], "phones": u.phones[None], "mask": np.ones((1, frames), np.float32),
         }
         batch = {k: torch.from_numpy(v).to(config.device) for k, v in batch.items()}
         _, _, terms = generator_losses(model, batch, config)
@@ -547,6 +576,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--dropout", type=float, default=defaults.network.dropout, help=f"dropout between the content LSTM's layers (default {defaults.network.dropout})")
     parser.add_argument("--lookahead", type=int, default=defaults.network.lookahead, help=f"motion frames of future audio the network hears (default {defaults.network.lookahead}: 60 ms, for streaming; 15 = 300 ms, the paper's window, for offline rendering)")
     parser.add_argument("--tempo-changes", type=float, default=defaults.tempo_changes, help=f"share of training windows sped up or slowed down ({TEMPO_RANGE[0]}–{TEMPO_RANGE[1]}×; default {defaults.tempo_changes})")
+    parser.add_argument("--phone-weight", type=float, default=defaults.phone_weight, help=f"weight of the auxiliary phone-classification loss (default {defaults.phone_weight}; 0: none)")
     parser.add_argument("--velocity-weight", type=float, default=defaults.velocity_weight, help=f"weight of the frame-to-frame velocity loss (default {defaults.velocity_weight})")
     parser.add_argument("--threads", type=int, default=defaults.threads)
     parser.add_argument("--device", default=defaults.device, help="torch device, e.g. cuda (default cpu)")
@@ -559,7 +589,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         sequence_frames=args.sequence_frames, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
         checkpoint_every=args.checkpoint_every, gan=not args.no_gan, threads=args.threads, device=args.device,
         feature_augment=not args.no_feature_augment, velocity_weight=args.velocity_weight, tempo_changes=args.tempo_changes,
-        network=NetworkConfig(dropout=args.dropout, lookahead=args.lookahead),
+        phone_weight=args.phone_weight,
+        network=NetworkConfig(dropout=args.dropout, lookahead=args.lookahead, phone_classes=len(PHONE_CLASSES) if args.phone_weight > 0 else 0),
     )
 
 

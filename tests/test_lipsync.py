@@ -4,6 +4,7 @@ import pytest
 
 from puppet import audio, lipsync
 from puppet.evaluate import lip_opening
+from puppet.features import motion_frame_count
 from puppet.landmarks import face_scale
 
 pytestmark = pytest.mark.skipif(not lipsync.has_model(), reason="no trained model in assets/models")
@@ -48,3 +49,26 @@ def test_any_input_gives_bounded_motion(demo, demo_speech, kind):
         assert np.isfinite(offsets).all() and np.abs(offsets).max() < 1.0
         return
     opening(demo, samples)
+
+
+def test_pauses_are_found_from_the_recordings_own_levels():
+    """Room tone 35 dB under the speech, 0.6 s long, is a pause; a 0.2 s gap between words is not."""
+    rng = np.random.default_rng(0)
+    t = np.arange(16000) / 16000
+    speech = (0.3 * np.sin(2 * np.pi * 180 * t)).astype(np.float32)  # 1 s, frames 0–49
+    room = rng.normal(0, 0.3 * 10 ** (-35 / 20), 16000).astype(np.float32)
+    samples = np.concatenate([speech, room[:9600], speech, room[:3200], speech])  # pause: frames 50–79; gap: 130–139
+    weights = lipsync.pause_weights(samples)
+    assert weights.shape == (motion_frame_count(len(samples)),) and weights.dtype == np.float32
+    assert np.all(weights[:50] == 1) and np.all(weights[80:] == 1)  # speech, and the short gap, untouched
+    assert np.all(weights[55:75] == 0) and 0 < weights[52] < 1 and 0 < weights[77] < 1  # eased in and out
+    assert np.all(lipsync.pause_weights(np.zeros(16000, np.float32)) == 1)  # nothing louder: no pause to find
+
+
+def test_the_mouth_rests_in_a_noisy_pause(demo, demo_speech):
+    """A pause full of hiss (not digital silence) between two sentences: the lips come to rest."""
+    speech = audio.load(demo_speech)
+    hiss = np.random.default_rng(1).normal(0, np.abs(speech).max() * 10 ** (-40 / 20), 24000).astype(np.float32)
+    gap = opening(demo, np.concatenate([speech, hiss, speech]))
+    start = int(len(speech) / 16000 * FPS)
+    assert np.abs(gap[start + 8 : start + int(1.5 * FPS) - 8]).max() < 0.002  # the network alone leaves ~0.008

@@ -15,6 +15,7 @@ from puppet.train import (
     CHECKPOINT,
     LOG,
     ONNX_FILE,
+    PHONE_CLASSES,
     TrainConfig,
     export,
     load_network,
@@ -24,11 +25,13 @@ from puppet.train import (
 VOICES = {"low": 120.0, "high": 210.0, "other": 160.0}  # speaker → fundamental (Hz); "other" is held out
 LOWER_LIP_AND_CHIN = [7, 8, 9, 56, 57, 58, 65, 66, 67]
 # The paper's layout at a fraction of the width, so that a few CPU steps show learning quickly.
-TINY = NetworkConfig(content_hidden=64, content_mlp=(128, 64), content_code=16, speaker_reduced=32, window=64, speaker_mlp=64)
+TINY = NetworkConfig(content_hidden=64, content_mlp=(128, 64), content_code=16, speaker_reduced=32, window=64, speaker_mlp=64,
+                     phone_classes=len(PHONE_CLASSES))
 
 
 def synthetic_utterance(rng, f0, seconds):
-    """Harmonic bursts between silences, and targets whose mouth opens with the burst envelope."""
+    """Harmonic bursts between silences, targets whose mouth opens with the burst envelope, and phones:
+    each burst an "AA", silence between."""
     n = int(seconds * features.SAMPLE_RATE)
     envelope = np.zeros(n, np.float32)
     position = int(rng.uniform(0.1, 0.3) * features.SAMPLE_RATE)
@@ -45,13 +48,17 @@ def synthetic_utterance(rng, f0, seconds):
     offsets[:, LOWER_LIP_AND_CHIN, 1] = 0.3 * envelope[centres, None]
     rotation = np.zeros((frames, 3), np.float32)
     rotation[:, 0] = 0.05 * np.sin(np.arange(frames) / 25 + f0)
-    return samples, offsets, rotation
+    voiced = np.r_[False, envelope > 0, False]
+    edges = np.flatnonzero(voiced[1:] != voiced[:-1]) / features.SAMPLE_RATE  # burst starts and ends, seconds
+    times = [0.0, *edges, n / features.SAMPLE_RATE]
+    phones = [{"phone": "AA" if i % 2 else "SIL", "start": a, "end": b} for i, (a, b) in enumerate(zip(times, times[1:])) if b > a]
+    return samples, offsets, rotation, phones
 
 
 def make_corpus(folder, seed=0, per_voice=3):
     """A corpus folder as puppet.corpus and the labellers write it (plus cached speaker embeddings)."""
     rng = np.random.default_rng(seed)
-    for sub in ("audio", "targets", "embeddings"):
+    for sub in ("audio", "targets", "embeddings", "phones"):
         (folder / sub).mkdir(parents=True, exist_ok=True)
     lines = []
     for speaker, f0 in VOICES.items():
@@ -59,12 +66,13 @@ def make_corpus(folder, seed=0, per_voice=3):
         embedding /= np.linalg.norm(embedding)
         for i in range(1 if speaker == "other" else per_voice):
             uid = f"{speaker}{i:02d}"
-            samples, offsets, rotation = synthetic_utterance(rng, f0, rng.uniform(1.5, 2.5))
+            samples, offsets, rotation, phones = synthetic_utterance(rng, f0, rng.uniform(1.5, 2.5))
             with wave.open(str(folder / "audio" / f"{uid}.wav"), "wb") as f:
                 f.setnchannels(1), f.setsampwidth(2), f.setframerate(features.SAMPLE_RATE)
                 f.writeframes((samples * 32767).astype("<i2").tobytes())
             np.savez(folder / "targets" / f"{uid}.npz", offsets=offsets, rotation=rotation, fps=50)
             np.save(folder / "embeddings" / f"{uid}.npy", embedding)
+            (folder / "phones" / f"{uid}.json").write_text(json.dumps(phones))
             heldout = speaker == "other"
             lines.append(json.dumps({"id": uid, "text": "bursts", "speaker": speaker, "heldout": heldout, "seconds": len(samples) / 16000}))
     lines.append(json.dumps({"id": "unlabelled", "text": "x", "speaker": "low", "heldout": False, "seconds": 1.0}))
@@ -94,6 +102,8 @@ def test_loss_falls(run):
     last = np.mean([line["train"]["position"] for line in lines[-3:]])
     assert [line["step"] for line in lines] == list(range(1, 31))
     assert last < 0.5 * first
+    first_phone = np.mean([line["train"]["phone"] for line in lines[:3]])
+    assert np.mean([line["train"]["phone"] for line in lines[-3:]]) < 0.9 * first_phone  # from ln 40 ≈ 3.7 (weight 0.02)
     validation = [line for line in log_lines(Path(run.out)) if "validation" in line]
     assert [line["step"] for line in validation] == [15, 30]
 
@@ -139,6 +149,16 @@ def test_export_matches_torch(run, tmp_path):
     assert json.loads(meta["feature_spec"]) == json.loads(json.dumps(features.SPEC))
     assert meta["n_landmarks"] == "68" and meta["lookahead_frames"] == str(LOOKAHEAD) and float(meta["motion_fps"]) == 50
     assert json.loads(meta["training"])["steps"] == 30
+    assert b"phone_head" not in path.read_bytes()  # the phone classifier is for training only
+
+
+def test_frame_phones_names_the_phone_at_each_frame_centre():
+    from puppet.train import frame_phones
+
+    rows = [{"phone": "SIL", "start": 0.0, "end": 0.25}, {"phone": "P", "start": 0.25, "end": 0.28},
+            {"phone": "IY", "start": 0.28, "end": 0.4}]
+    classes = [PHONE_CLASSES[i] for i in frame_phones(rows, 22)]  # frame j is centred at (j + 0.5) × 20 ms
+    assert classes == ["SIL"] * 12 + ["P"] * 2 + ["IY"] * 6 + ["SIL"] * 2  # silence past the last phone
 
 
 def test_feature_augmentation_recolours_windows_but_keeps_silence_and_shape():
@@ -197,11 +217,15 @@ def test_a_stretched_window_keeps_sound_and_mouth_together():
     offsets = np.zeros((frames, 68, 3), np.float32)
     steps[120:130] = -1.0  # a loud burst at motion frames 120–129 …
     offsets[120:130, 66, 1] = 0.3  # … with the mouth open
-    u = Utterance("a", "s", steps, offsets, np.zeros((frames, 3), np.float32), np.zeros(256, np.float32))
+    phones = np.zeros(frames, np.int64)
+    phones[120:130] = PHONE_CLASSES.index("AA")
+    u = Utterance("a", "s", steps, offsets, np.zeros((frames, 3), np.float32), np.zeros(256, np.float32), phones)
     same = stretched_window(u, 20, 100, lookahead, 1.0)
     np.testing.assert_array_equal(same[0], steps[20:123])
-    fast, mouth, rotation = stretched_window(u, 20, 60, lookahead, 2.0)
-    assert fast.shape == (63, 160) and mouth.shape == (60, 68, 3) and rotation.shape == (60, 3)
+    fast, mouth, rotation, said = stretched_window(u, 20, 60, lookahead, 2.0)
+    assert fast.shape == (63, 160) and mouth.shape == (60, 68, 3) and rotation.shape == (60, 3) and said.shape == (60,)
     loud = np.flatnonzero(fast.max(axis=1) > -3)
     open_ = np.flatnonzero(mouth[:, 66, 1] > 0.1)
     assert abs(loud.mean() - 52) < 1 and abs(open_.mean() - 52) < 1 and abs(len(open_) - 5) <= 1  # (120 − 20) / 2 = 50 on
+    said_aa = np.flatnonzero(said == PHONE_CLASSES.index("AA"))
+    assert abs(said_aa.mean() - 52) < 1 and abs(len(said_aa) - 5) <= 1  # the phone labels move with them
