@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from puppet import features
 from puppet.alignment import PHONES
@@ -58,6 +59,7 @@ LOG = "log.jsonl"
 ONNX_FILE = "landmarks.onnx"
 EXPORT_TOLERANCE = 1e-4  # onnxruntime vs torch, absolute, on every output
 PHONE_CLASSES = (SILENT_PHONE, *PHONES)  # the phone classifier's classes, in order
+SILENT_CLASS = PHONE_CLASSES.index(SILENT_PHONE)
 
 
 @dataclass(frozen=True)
@@ -153,7 +155,7 @@ def frame_phones(rows: list[dict], frames: int) -> np.ndarray:
     phones/ID.json rows ({"phone", "start", "end"} in seconds, tiling the audio); silence past the last."""
     centres = (np.arange(frames) + 0.5) / features.MOTION_FPS
     ends = np.array([row["end"] for row in rows])
-    classes = np.array([PHONE_CLASSES.index(row["phone"]) for row in rows] + [0], np.int64)
+    classes = np.array([PHONE_CLASSES.index(row["phone"]) for row in rows] + [SILENT_CLASS], np.int64)
     return classes[np.searchsorted(ends, centres, side="right")]
 
 
@@ -198,7 +200,7 @@ def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: in
         "speaker": np.zeros((config.batch_size, 256), np.float32),
         "offsets": np.zeros((config.batch_size, frames, N_LANDMARKS, 3), np.float32),
         "rotation": np.zeros((config.batch_size, frames, 3), np.float32),
-        "phones": np.zeros((config.batch_size, frames), np.int64),
+        "phones": np.full((config.batch_size, frames), SILENT_CLASS, np.int64),
         "mask": np.zeros((config.batch_size, frames), np.float32),
     }
     for b, index in enumerate(rng.choice(len(utterances), config.batch_size, p=lengths / lengths.sum())):
@@ -217,7 +219,7 @@ def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: in
         if n > REST_FRAMES and rng.random() < config.silence_tails:
             cut = int(rng.integers(n // 4, n))
             silence_tail(batch["steps"][b], batch["offsets"][b], batch["rotation"][b], n, cut)
-            batch["phones"][b, cut:] = 0  # silence
+            batch["phones"][b, cut:] = SILENT_CLASS
     return {k: torch.from_numpy(v).to(config.device) for k, v in batch.items()}
 
 
@@ -518,7 +520,7 @@ def train(config: TrainConfig) -> Path:
     # The loop.
     model.train()
     validation = None
-    with open(out / LOG, "a") as log:
+    with open(out / LOG, "a") as log, tqdm(total=config.steps, initial=step, desc="training", unit="step", mininterval=1.0) as progress:
         started = time.time()
         while step < config.steps:
             lr = learning_rate(step, config)
@@ -542,14 +544,16 @@ def train(config: TrainConfig) -> Path:
                 d_optimizer.step()
                 terms["discriminator"] = float(d_loss.detach())
             step += 1
+            progress.update()
             if step % config.log_every == 0 or step == config.steps:
+                progress.set_postfix(loss=f"{terms['total']:.4f}", refresh=False)
                 log.write(json.dumps({"step": step, "lr": lr, "train": terms, "seconds": round(time.time() - started, 1)}) + "\n")
                 log.flush()
             if heldout and (step % config.eval_every == 0 or step == config.steps):
                 validation = evaluate(model, heldout, config)
                 log.write(json.dumps({"step": step, "validation": validation}) + "\n")
                 log.flush()
-                print(f"step {step}: train {terms['total']:.4f}, held-out {validation['total']:.4f}")
+                progress.write(f"step {step}: train {terms['total']:.4f}, held-out {validation['total']:.4f}")
             if step % config.checkpoint_every == 0 or step == config.steps:
                 checkpoint(validation)
     if not checkpoint_path.exists():
