@@ -90,22 +90,27 @@ class TrainConfig:
     feature_augment: bool = True  # recolour, re-level and band-mask each training window's log-mels (see augment_steps)
     silence_tails: float = 0.1  # share of training windows cut to silence part-way, the mouth easing to rest (see silence_tail)
     tempo_changes: float = 0.0  # share of training windows sped up or slowed down, sound and motion alike (see stretched_window)
-    phone_weight: float = 0.02  # the phone classifier's cross-entropy (nats per frame) against positions; 0: none
-    network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1, phone_classes=len(PHONE_CLASSES)))  # ignored when resuming
+    phone_weight: float = 0.0  # the phone classifier's cross-entropy (nats per frame) against positions; 0: none (see phone_loss)
+    network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1))  # ignored when resuming
 
 
 # The two shipped models (puppet.predictor.MODEL_FILES): TrainConfig's defaults with these changes
 # (lookahead in motion frames). The live window can wait only 60 ms for the future; a file is known whole, so its model hears the
-# 300 ms the paper's content window spans. Tempo changes helped the live model (fast speech, real
-# video) and not the offline one (assets/models/README.md), so only the live model trains with them.
-RECIPES = {"streaming": {"lookahead": LOOKAHEAD, "tempo_changes": 0.5}, "offline": {"lookahead": 15, "tempo_changes": 0.0}}
+# 300 ms the paper's content window spans. Tempo changes and the phone classifier helped the live model
+# (real video, held-out voices) and not the offline one (assets/models/README.md), so only the live
+# model trains with them.
+RECIPES = {
+    "streaming": {"lookahead": LOOKAHEAD, "tempo_changes": 0.5, "phone_weight": 0.02},
+    "offline": {"lookahead": 15, "tempo_changes": 0.0, "phone_weight": 0.0},
+}
 
 
 def recipe(kind: str, corpus: str, out: str) -> TrainConfig:
     """The TrainConfig that made the shipped `kind` model ("streaming" or "offline")."""
     base, settings = TrainConfig(), RECIPES[kind]
-    return replace(base, corpus=corpus, out=out, tempo_changes=settings["tempo_changes"],
-                   network=replace(base.network, lookahead=settings["lookahead"]))
+    phone_classes = len(PHONE_CLASSES) if settings["phone_weight"] > 0 else 0
+    return replace(base, corpus=corpus, out=out, tempo_changes=settings["tempo_changes"], phone_weight=settings["phone_weight"],
+                   network=replace(base.network, lookahead=settings["lookahead"], phone_classes=phone_classes))
 
 
 # -- data ------------------------------------------------------------------------------------------

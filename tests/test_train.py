@@ -90,7 +90,7 @@ def run(tmp_path_factory):
     config = TrainConfig(
         corpus=str(make_corpus(root / "corpus")), out=str(root / "out"), batch_size=8, sequence_frames=64,
         lr=3e-3, warmup_steps=5, steps=30, eval_every=15, checkpoint_every=10, log_every=1, gan=False, export=False,
-        network=TINY, threads=1,
+        network=TINY, threads=1, phone_weight=0.02,
     )
     train(config)
     return config
@@ -195,14 +195,18 @@ def test_a_silence_tail_silences_the_audio_and_brings_the_mouth_to_rest():
 
 @pytest.mark.parametrize("kind", ["streaming", "offline"])
 def test_recipes_match_the_shipped_models(kind):
-    """`puppet train` rebuilds each shipped model with the lookahead it was exported with."""
+    """`puppet train` rebuilds each shipped model with the lookahead and the phone classifier (or none)
+    it was trained with."""
     from puppet.predictor import Predictor, default_model
     from puppet.train import recipe
 
     if not default_model(kind).exists():
         pytest.skip("no trained model in assets/models yet")
     config = recipe(kind, corpus="corpus", out="runs")
-    assert Predictor(default_model(kind)).lookahead == config.network.lookahead
+    shipped = Predictor(default_model(kind))
+    assert shipped.lookahead == config.network.lookahead
+    trained = json.loads(shipped.metadata["network"])  # the NetworkConfig it was trained with
+    assert trained.get("phone_classes", 0) == config.network.phone_classes and trained["dropout"] == config.network.dropout
     assert config.network.lookahead * 1000 // features.MOTION_FPS <= (60 if kind == "streaming" else 300)
 
 
