@@ -91,7 +91,6 @@ class TrainConfig:
     silence_tails: float = 0.1  # share of training windows cut to silence part-way, the mouth easing to rest (see silence_tail)
     tempo_changes: float = 0.0  # share of training windows sped up or slowed down, sound and motion alike (see stretched_window)
     phone_weight: float = 0.0  # the phone classifier's cross-entropy (nats per frame) against positions; 0: none (see phone_loss)
-    phone_at_newest: bool = False  # name the phone of the newest audio a step heard (frame t), not of its output frame (t − lookahead)
     network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1))  # ignored when resuming
 
 
@@ -325,7 +324,7 @@ def generator_losses(model: Network, batch: dict, config: TrainConfig, discrimin
         + config.velocity_weight * terms["velocity"]
     )
     if out.phones is not None and config.phone_weight > 0:
-        logits = out.phones[:, : mask.shape[1]] if config.phone_at_newest else out.phones[:, lookahead:]
+        logits = out.phones[:, lookahead:]
         terms["phone"] = phone_loss(logits, batch["phones"], mask)
         terms["phone_accuracy"] = ((logits.argmax(-1) == batch["phones"]).float() * mask).sum() / mask.sum().clamp(min=1.0)
         total = total + config.phone_weight * terms["phone"]

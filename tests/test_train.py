@@ -233,25 +233,3 @@ def test_a_stretched_window_keeps_sound_and_mouth_together():
     assert abs(loud.mean() - 52) < 1 and abs(open_.mean() - 52) < 1 and abs(len(open_) - 5) <= 1  # (120 − 20) / 2 = 50 on
     said_aa = np.flatnonzero(said == PHONE_CLASSES.index("AA"))
     assert abs(said_aa.mean() - 52) < 1 and abs(len(said_aa) - 5) <= 1  # the phone labels move with them
-
-
-@pytest.mark.parametrize("at_newest", [False, True])
-def test_the_phone_classifier_names_the_output_frame_or_the_newest_audio(at_newest):
-    """Output step t shows motion frame t − lookahead; its phone label is that frame's, or, with
-    phone_at_newest, the phone of frame t, the newest audio step t has heard."""
-    from puppet.network import Network, phone_loss
-    from puppet.train import generator_losses
-
-    torch.manual_seed(0)
-    model = Network(replace(TINY, lookahead=4))
-    frames = 20
-    batch = {
-        "steps": torch.randn(2, frames + 4, 160) - 2.5, "speaker": torch.nn.functional.normalize(torch.randn(2, 256), dim=-1),
-        "offsets": torch.zeros(2, frames, 68, 3), "rotation": torch.zeros(2, frames, 3),
-        "phones": torch.randint(0, len(PHONE_CLASSES), (2, frames)), "mask": torch.ones(2, frames),
-    }
-    config = TrainConfig(phone_weight=0.02, phone_at_newest=at_newest, network=model.config)
-    _, (out, _), terms = generator_losses(model, batch, config)
-    steps = slice(0, frames) if at_newest else slice(4, frames + 4)
-    want = phone_loss(out.phones[:, steps].detach(), batch["phones"], batch["mask"])
-    assert terms["phone"] == pytest.approx(float(want), rel=1e-6)
