@@ -13,7 +13,7 @@ optimizers, evaluation, the loop, export. The corpus folder (built by puppet.cor
                         classifier's labels
     embeddings/ID.npy   (256,) float32 speaker embedding, computed here with puppet.speaker.embed and
                         cached when missing
-Only ids with targets are used (labelling may still be running); held-out speakers are never
+Only ids with targets and phones are used (labelling may still be running); held-out speakers are never
 trained on, only evaluated.
 """
 import argparse
@@ -175,14 +175,15 @@ def load_corpus(corpus: Path, lookahead: int) -> tuple[list[Utterance], list[Utt
             continue
         entry = json.loads(line)
         target_path = corpus / "targets" / f"{entry['id']}.npz"
-        if not target_path.exists():
+        phones_path = corpus / "phones" / f"{entry['id']}.json"
+        if not (target_path.exists() and phones_path.exists()):
             continue  # not labelled yet
         samples = read_wav(corpus / "audio" / f"{entry['id']}.wav")
         target = np.load(target_path)
         frames = features.motion_frame_count(len(samples))
         if target["offsets"].shape != (frames, N_LANDMARKS, 3) or target["rotation"].shape != (frames, 3):
             raise PuppetError(f"{target_path}: expected {frames} frames of offsets (T, 68, 3) and rotation (T, 3)")
-        phones = json.loads((corpus / "phones" / f"{entry['id']}.json").read_text())
+        phones = json.loads(phones_path.read_text())
         utterance = Utterance(
             entry["id"], str(entry["speaker"]), audio_steps(samples, lookahead),
             target["offsets"].astype(np.float32), target["rotation"].astype(np.float32),

@@ -233,3 +233,13 @@ def test_a_stretched_window_keeps_sound_and_mouth_together():
     assert abs(loud.mean() - 52) < 1 and abs(open_.mean() - 52) < 1 and abs(len(open_) - 5) <= 1  # (120 − 20) / 2 = 50 on
     said_aa = np.flatnonzero(said == PHONE_CLASSES.index("AA"))
     assert abs(said_aa.mean() - 52) < 1 and abs(len(said_aa) - 5) <= 1  # the phone labels move with them
+
+
+def test_an_utterance_without_its_phones_counts_as_not_labelled_yet(tmp_path):
+    from puppet.train import load_corpus
+
+    corpus = make_corpus(tmp_path / "corpus", per_voice=2)
+    before, _ = load_corpus(corpus, 3)
+    (corpus / "phones" / "low00.json").unlink()  # labelling stopped between targets and phones
+    after, _ = load_corpus(corpus, 3)
+    assert len(after) == len(before) - 1 and "low00" not in {u.id for u in after}
