@@ -14,7 +14,9 @@ optimizers, evaluation, the loop, export. The corpus folder (built by puppet.cor
     embeddings/ID.npy   (256,) float32 speaker embedding, computed here with puppet.speaker.embed and
                         cached when missing
 Only ids with targets and phones are used (labelling may still be running); held-out speakers are never
-trained on, only evaluated.
+trained on, only evaluated. Every eval_every steps the last eval_utterances held-out utterances are scored;
+the checkpoint with their lowest position loss is kept as out/best.pt and is the one exported (later steps
+can fit the training voices better and unseen voices worse).
 """
 import argparse
 import io
@@ -55,6 +57,7 @@ from puppet.predictor import N_STEP, SILENCE, audio_steps
 
 MODEL_VERSION = "1"  # bump when the exported inputs, outputs or their meaning change
 CHECKPOINT = "checkpoint.pt"
+BEST_CHECKPOINT = "best.pt"  # the checkpoint with the lowest held-out position loss so far: the one exported
 LOG = "log.jsonl"
 ONNX_FILE = "landmarks.onnx"
 EXPORT_TOLERANCE = 1e-4  # onnxruntime vs torch, absolute, on every output
@@ -85,7 +88,7 @@ class TrainConfig:
     grad_clip: float = 1.0
     threads: int = 0  # torch intra-op threads; 0 leaves torch's default
     device: str = "cpu"  # "cuda" to train on a GPU
-    eval_utterances: int = 64  # held-out utterances evaluated at most
+    eval_utterances: int = 64  # held-out utterances that choose the exported checkpoint (the last ones; puppet eval scores the first)
     export: bool = True  # write out/landmarks.onnx at the end, checked against torch
     feature_augment: bool = True  # recolour, re-level and band-mask each training window's log-mels (see augment_steps)
     silence_tails: float = 0.1  # share of training windows cut to silence part-way, the mouth easing to rest (see silence_tail)
@@ -350,12 +353,18 @@ def discriminator_context(out, lookahead: int) -> tuple[torch.Tensor, torch.Tens
     return out.code[:, lookahead:].detach(), out.speaker.detach()
 
 
+def validation_set(heldout: list[Utterance], config: TrainConfig) -> list[Utterance]:
+    """The held-out utterances whose loss chooses the checkpoint to export: the last
+    config.eval_utterances of them, apart from the first ones that `puppet eval --corpus` scores."""
+    return heldout[-config.eval_utterances :]
+
+
 @torch.no_grad()
 def evaluate(model: Network, utterances: list[Utterance], config: TrainConfig) -> dict:
     """Mean losses over whole held-out utterances, each run from the start as at inference."""
     model.eval()
     sums: dict[str, float] = {}
-    for u in utterances[: config.eval_utterances]:
+    for u in utterances:
         frames = len(u.offsets)
         batch = {
             "steps": u.steps[None], "speaker": u.speaker[None], "offsets": u.offsets[None],
@@ -366,8 +375,7 @@ def evaluate(model: Network, utterances: list[Utterance], config: TrainConfig) -
         for k, v in terms.items():
             sums[k] = sums.get(k, 0.0) + v
     model.train()
-    count = min(len(utterances), config.eval_utterances)
-    return {k: v / count for k, v in sums.items()}
+    return {k: v / len(utterances) for k, v in sums.items()}
 
 
 # -- checkpoints and export ------------------------------------------------------------------------
@@ -475,10 +483,11 @@ def learning_rate(step: int, config: TrainConfig) -> float:
 
 
 def train(config: TrainConfig) -> Path:
-    """Train (or resume) to config.steps; returns the checkpoint path (the ONNX model lies beside it)."""
+    """Train (or resume) to config.steps; returns the path of the checkpoint exported (the ONNX model
+    lies beside it): the one with the lowest held-out position loss, the last one without held-out speakers."""
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
-    checkpoint_path = out / CHECKPOINT
+    checkpoint_path, best_path = out / CHECKPOINT, out / BEST_CHECKPOINT
     if config.threads > 0:
         torch.set_num_threads(config.threads)
     torch.manual_seed(config.seed)
@@ -505,11 +514,13 @@ def train(config: TrainConfig) -> Path:
         rng.bit_generator.state = json.loads(resumed["rng"]["numpy"])
     else:
         model.set_feature_stats(*feature_stats(utterances, lookahead))
+    validation_utterances = validation_set(heldout, config)
+    best = held_out_position(best_path)
     speakers = sorted({u.speaker_id for u in utterances})
     print(f"{len(utterances)} training utterances from {len(speakers)} speakers, {len(heldout)} held out; "
           f"{parameter_count(model):,} parameters; {'resuming at' if resumed else 'starting from'} step {step}")
 
-    def checkpoint(validation: dict | None) -> None:
+    def checkpoint(validation: dict | None, path: Path = checkpoint_path) -> None:
         training = {
             "steps": step, "seed": config.seed, "corpus": str(config.corpus), "utterances": len(utterances),
             "speakers": len(speakers), "heldout_utterances": len(heldout), "validation": validation,
@@ -521,7 +532,7 @@ def train(config: TrainConfig) -> Path:
         }
         if config.gan:
             state["discriminator"], state["d_optimizer"] = discriminator.state_dict(), d_optimizer.state_dict()
-        save_checkpoint(checkpoint_path, state)
+        save_checkpoint(path, state)
 
     # The loop.
     model.train()
@@ -555,18 +566,32 @@ def train(config: TrainConfig) -> Path:
                 progress.set_postfix(loss=f"{terms['total']:.4f}", refresh=False)
                 log.write(json.dumps({"step": step, "lr": lr, "train": terms, "seconds": round(time.time() - started, 1)}) + "\n")
                 log.flush()
-            if heldout and (step % config.eval_every == 0 or step == config.steps):
-                validation = evaluate(model, heldout, config)
+            if validation_utterances and (step % config.eval_every == 0 or step == config.steps):
+                validation = evaluate(model, validation_utterances, config)
                 log.write(json.dumps({"step": step, "validation": validation}) + "\n")
                 log.flush()
                 progress.write(f"step {step}: train {terms['total']:.4f}, held-out {validation['total']:.4f}")
+                if validation["position"] < best:
+                    best = validation["position"]
+                    checkpoint(validation, best_path)
             if step % config.checkpoint_every == 0 or step == config.steps:
                 checkpoint(validation)
     if not checkpoint_path.exists():
         checkpoint(validation)  # resumed at or beyond config.steps
+    chosen = best_path if best_path.exists() else checkpoint_path
     if config.export:
-        print(f"exported {export(checkpoint_path, out / ONNX_FILE)}")
-    return checkpoint_path
+        chosen_step = torch.load(chosen, map_location="cpu", weights_only=True)["step"]
+        why = ", the lowest held-out position loss" if chosen == best_path else ""
+        print(f"exported {export(chosen, out / ONNX_FILE)} (step {chosen_step}{why})")
+    return chosen
+
+
+def held_out_position(checkpoint: Path) -> float:
+    """The held-out position loss a checkpoint was saved with; infinity when there is none."""
+    if not checkpoint.exists():
+        return math.inf
+    validation = torch.load(checkpoint, map_location="cpu", weights_only=True)["training"]["validation"]
+    return validation["position"] if validation else math.inf
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -243,3 +243,25 @@ def test_an_utterance_without_its_phones_counts_as_not_labelled_yet(tmp_path):
     (corpus / "phones" / "low00.json").unlink()  # labelling stopped between targets and phones
     after, _ = load_corpus(corpus, 3)
     assert len(after) == len(before) - 1 and "low00" not in {u.id for u in after}
+
+
+def test_the_checkpoint_with_the_lowest_held_out_loss_is_kept_and_exported(run, tmp_path):
+    from puppet.train import BEST_CHECKPOINT
+
+    validation = [line for line in log_lines(Path(run.out)) if "validation" in line]
+    best = min(validation, key=lambda line: line["validation"]["position"])
+    _, kept = load_network(Path(run.out, BEST_CHECKPOINT))
+    assert kept["step"] == best["step"]
+    assert kept["training"]["validation"] == best["validation"]
+    out = tmp_path / "out"
+    shutil.copytree(run.out, out)
+    worse = torch.load(out / BEST_CHECKPOINT, weights_only=True)
+    worse["training"]["validation"]["position"] = 1e9  # any later evaluation beats it
+    torch.save(worse, out / BEST_CHECKPOINT)
+    chosen = train(replace(run, out=str(out), steps=40, eval_every=5, export=True))
+    assert chosen == out / BEST_CHECKPOINT
+    _, kept = load_network(chosen)
+    assert kept["step"] in (35, 40) and kept["training"]["validation"]["position"] < 1e9
+    from puppet.predictor import Predictor
+
+    assert json.loads(Predictor(out / ONNX_FILE).metadata["training"])["steps"] == kept["step"]
