@@ -464,6 +464,14 @@ def export(checkpoint: str | Path, path: str | Path) -> Path:
     return path
 
 
+def held_out_position(checkpoint: Path) -> float:
+    """The held-out position loss a checkpoint was saved with; infinity when there is none."""
+    if not checkpoint.exists():
+        return math.inf
+    validation = torch.load(checkpoint, map_location="cpu", weights_only=True)["training"]["validation"]
+    return validation["position"] if validation else math.inf
+
+
 def save_checkpoint(path: Path, state: dict) -> None:
     """Write atomically, so a run killed mid-save keeps its previous checkpoint."""
     temporary = path.with_suffix(".tmp")
@@ -584,14 +592,6 @@ def train(config: TrainConfig) -> Path:
         why = ", the lowest held-out position loss" if chosen == best_path else ""
         print(f"exported {export(chosen, out / ONNX_FILE)} (step {chosen_step}{why})")
     return chosen
-
-
-def held_out_position(checkpoint: Path) -> float:
-    """The held-out position loss a checkpoint was saved with; infinity when there is none."""
-    if not checkpoint.exists():
-        return math.inf
-    validation = torch.load(checkpoint, map_location="cpu", weights_only=True)["training"]["validation"]
-    return validation["position"] if validation else math.inf
 
 
 def build_parser() -> argparse.ArgumentParser:

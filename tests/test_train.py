@@ -246,6 +246,7 @@ def test_an_utterance_without_its_phones_counts_as_not_labelled_yet(tmp_path):
 
 
 def test_the_checkpoint_with_the_lowest_held_out_loss_is_kept_and_exported(run, tmp_path):
+    from puppet.predictor import Predictor
     from puppet.train import BEST_CHECKPOINT
 
     validation = [line for line in log_lines(Path(run.out)) if "validation" in line]
@@ -262,6 +263,4 @@ def test_the_checkpoint_with_the_lowest_held_out_loss_is_kept_and_exported(run, 
     assert chosen == out / BEST_CHECKPOINT
     _, kept = load_network(chosen)
     assert kept["step"] in (35, 40) and kept["training"]["validation"]["position"] < 1e9
-    from puppet.predictor import Predictor
-
     assert json.loads(Predictor(out / ONNX_FILE).metadata["training"])["steps"] == kept["step"]
