@@ -62,11 +62,18 @@ class Motion:
         )
 
 
+def interpolate_rows(sequence: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """(P, ...) float32: a (T, ...) sequence linearly interpolated at (P,) fractional row positions
+    (row t at position t); positions outside [0, T − 1] hold the first or last row."""
+    positions = np.clip(positions, 0, len(sequence) - 1)
+    low = np.floor(positions).astype(int)
+    high = np.minimum(low + 1, len(sequence) - 1)
+    weight = (positions - low).reshape(-1, *([1] * (sequence.ndim - 1)))
+    return ((1 - weight) * sequence[low] + weight * sequence[high]).astype(np.float32)
+
+
 def resample(sequence: np.ndarray, fps_in: float, fps_out: float, frames: int) -> np.ndarray:
     """(frames, ...) float32: a (T, ...) per-frame sequence at fps_in, linearly interpolated at the
     centres of `frames` frames at fps_out (frame i covers [i/fps, (i+1)/fps)); ends are held."""
-    t_out = (np.arange(frames) + 0.5) / fps_out
-    t_in = (np.arange(len(sequence)) + 0.5) / fps_in
-    flat = sequence.reshape(len(sequence), -1)
-    columns = [np.interp(t_out, t_in, flat[:, k]) for k in range(flat.shape[1])]
-    return np.stack(columns, axis=1).reshape((frames,) + sequence.shape[1:]).astype(np.float32)
+    centres = (np.arange(frames) + 0.5) / fps_out  # seconds; input row t is centred at (t + 0.5) / fps_in
+    return interpolate_rows(sequence, centres * fps_in - 0.5)

@@ -38,6 +38,7 @@ from puppet import features
 from puppet.alignment import PHONES
 from puppet.alignment import SILENCE as SILENT_PHONE
 from puppet.errors import PuppetError
+from puppet.motion import interpolate_rows
 from puppet.network import (
     LOOKAHEAD,
     N_LANDMARKS,
@@ -246,19 +247,10 @@ def stretched_window(u: Utterance, start: int, frames: int, lookahead: int, rate
         return u.steps[start : end + lookahead], u.offsets[start:end], u.rotation[start:end], u.phones[start:end]
     mel = u.steps.reshape(-1, features.N_MELS)  # (2(T + L), 80), frame k centred at (k + 0.5) / 100 s
     k = np.arange(2 * (frames + lookahead))
-    steps = _interpolate_rows(mel, 2 * start + (k + 0.5) * rate - 0.5).reshape(-1, N_STEP)
+    steps = interpolate_rows(mel, 2 * start + (k + 0.5) * rate - 0.5).reshape(-1, N_STEP)
     j = start + (np.arange(frames) + 0.5) * rate - 0.5  # motion frame j centred at (j + 0.5) / 50 s
     phones = u.phones[np.clip(np.rint(j).astype(int), 0, len(u.phones) - 1)]
-    return steps, _interpolate_rows(u.offsets, j), _interpolate_rows(u.rotation, j), phones
-
-
-def _interpolate_rows(array: np.ndarray, positions: np.ndarray) -> np.ndarray:
-    """array (N, ...) sampled at fractional row `positions` (clamped to the rows), linearly; float32."""
-    positions = np.clip(positions, 0, len(array) - 1)
-    low = np.floor(positions).astype(int)
-    high = np.minimum(low + 1, len(array) - 1)
-    weight = (positions - low).reshape(-1, *([1] * (array.ndim - 1)))
-    return ((1 - weight) * array[low] + weight * array[high]).astype(np.float32)
+    return steps, interpolate_rows(u.offsets, j), interpolate_rows(u.rotation, j), phones
 
 
 # Feature-domain augmentation, drawn afresh for every training window (log10 mel units; 1 = 10 dB of power).
