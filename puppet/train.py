@@ -109,12 +109,16 @@ RECIPES = {
 }
 
 
+def classifier_size(phone_weight: float) -> int:
+    """NetworkConfig.phone_classes for a phone-loss weight: a classifier head only where it is trained."""
+    return len(PHONE_CLASSES) if phone_weight > 0 else 0
+
+
 def recipe(kind: str, corpus: str, out: str) -> TrainConfig:
     """The TrainConfig that made the shipped `kind` model ("streaming" or "offline")."""
     base, settings = TrainConfig(), RECIPES[kind]
-    phone_classes = len(PHONE_CLASSES) if settings["phone_weight"] > 0 else 0
     return replace(base, corpus=corpus, out=out, tempo_changes=settings["tempo_changes"], phone_weight=settings["phone_weight"],
-                   network=replace(base.network, lookahead=settings["lookahead"], phone_classes=phone_classes))
+                   network=replace(base.network, lookahead=settings["lookahead"], phone_classes=classifier_size(settings["phone_weight"])))
 
 
 # -- data ------------------------------------------------------------------------------------------
@@ -617,7 +621,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         checkpoint_every=args.checkpoint_every, gan=not args.no_gan, threads=args.threads, device=args.device,
         feature_augment=not args.no_feature_augment, velocity_weight=args.velocity_weight, tempo_changes=args.tempo_changes,
         phone_weight=args.phone_weight,
-        network=NetworkConfig(dropout=args.dropout, lookahead=args.lookahead, phone_classes=len(PHONE_CLASSES) if args.phone_weight > 0 else 0),
+        network=NetworkConfig(dropout=args.dropout, lookahead=args.lookahead, phone_classes=classifier_size(args.phone_weight)),
     )
 
 
