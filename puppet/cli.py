@@ -1,6 +1,5 @@
 """The `puppet` command: argument parsing and the one place errors become one-line messages."""
 import argparse
-import importlib.util
 import os
 import sys
 from dataclasses import replace
@@ -76,6 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--demo", action="store_true", help="use the bundled character and speech clip")
     _add_rigging_arguments(render)
     render.add_argument("--motion", help="motion source: 'learned' (the lip-sync network; the default when installed), 'loudness' (a volume-driven baseline) or a track .npz (from --landmarks-out or puppet predict)")
+    render.add_argument("--transcript", type=Path, metavar="TEXT_FILE", help="the words spoken (UTF-8 text, English): the jaw and lips follow their phones, aligned to the audio; sharper than the network alone on p/b/m and oo/w")
     render.add_argument("--size", type=parse_size, help="output WIDTHxHEIGHT, or one number for the longer side (default: the portrait's size, at most 1080)")
     render.add_argument("--fps", type=float, default=25.0, help="frames per second (default 25)")
     render.add_argument("--background", type=parse_background, help="'transparent', white, black, green, blue, magenta, grey or #rrggbb (default: transparent for frames, white for video)")
@@ -151,6 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
     predict.add_argument("audio", type=Path, help="speech: any format FFmpeg reads")
     predict.add_argument("--face", type=Path, help="the face's 68 landmarks (text, .json or .npy; pixels); default: puppet's canonical face in a 512×512 frame")
     predict.add_argument("-o", "--output", type=Path, required=True, help="track file to write (.npz: landmarks (T,68,3) float32, fps)")
+    predict.add_argument("--transcript", type=Path, metavar="TEXT_FILE", help="the words spoken (UTF-8 text, English): the jaw and lips follow their phones, aligned to the audio")
     predict.add_argument("--fps", type=float, default=25.0, help="frames per second of the track (default 25)")
     predict.add_argument("--seed", type=int, default=0, help="seed for blinks and idle motion (default 0)")
     predict.add_argument("-f", "--force", action="store_true", help="overwrite an existing track")
@@ -241,7 +242,7 @@ def run(args: argparse.Namespace) -> int:
 
         return bench_main(args.json, args.seconds, args.clip, args.soak)
 
-    from puppet import video
+    from puppet import lipsync, video
 
     if args.demo:
         if args.input is not None:
@@ -257,7 +258,9 @@ def run(args: argparse.Namespace) -> int:
         if audio_path is None and args.motion in (None,) + video.MOTION_SOURCES:
             raise PuppetError("give an audio file after the portrait (or --motion TRACK.npz)")
     motion = args.motion or video.default_motion()
-    options = video.VideoOptions(fps=args.fps, background=args.background, samples=args.msaa, motion=motion, expression=args.expression)
+    transcript = lipsync.read_transcript(args.transcript) if args.transcript else None
+    options = video.VideoOptions(fps=args.fps, background=args.background, samples=args.msaa, motion=motion, expression=args.expression,
+                                 transcript=transcript)
     if args.size is not None:
         size = args.size if isinstance(args.size, tuple) else video.output_size(puppet.rig.image_size, args.size)
         options = replace(options, size=size)
@@ -294,10 +297,11 @@ def _predict(args: argparse.Namespace) -> int:
 
     output = check_track_output(args.output, args.force)
     rest = with_depth(load(args.face) if args.face else canonical_face_pixels())
+    transcript = lipsync.read_transcript(args.transcript) if args.transcript else None
     samples = audio.load(args.audio)
     audio.check_audible(samples, str(args.audio))
     frames = frame_count(len(samples), audio.ANALYSIS_RATE, args.fps)
-    motion = lipsync.learned_motion(samples, rest, args.fps, frames)
+    motion = lipsync.learned_motion(samples, rest, args.fps, frames, transcript=transcript)
     motion = motion + life_motion(frames, args.fps, rest, LifeOptions(seed=args.seed))
     track.write(output, posed_landmarks(rest, motion), args.fps)
     print(f"wrote {output} ({frames} frames at {args.fps:g} fps)")
@@ -352,8 +356,6 @@ def _evaluate(args: argparse.Namespace) -> int:
         raise PuppetError("give --corpus DIR (held-out synthetic voices), --videos DIR (real talking videos), --speech DIR (recordings with transcripts) and/or --labels N")
     if args.labels is not None and args.labels < 1:
         raise PuppetError("--labels needs a number of sentences, 1 or more")
-    if (args.speech is not None or args.labels is not None) and importlib.util.find_spec("pocketsphinx") is None:
-        raise PuppetError("--speech and --labels align phones with pocketsphinx, in the train extra: pip install 'puppet[train]'")
     if args.json and args.json.exists() and not args.force:
         raise PuppetError(f"{args.json} exists; use --force to overwrite")
     if args.plots and args.plots.is_dir() and any(args.plots.iterdir()) and not args.force:

@@ -12,16 +12,24 @@ found from its own levels (the live window has its noise gate instead, puppet.li
 at least PAUSE_SECONDS whose 20 ms frames all lie PAUSE_BELOW_DB under the recording's loud speech
 (its SPEECH_PERCENTILE frame) is a pause, and the mouth and brows ease to rest inside it over
 PAUSE_EASE_SECONDS from each end, head motion untouched.
+
+Transcripts. When the words spoken are known (a script, subtitles), the aligner (puppet.alignment)
+places their phones in the audio and the articulation model (puppet.visemes) that made the network's
+training targets moves the jaw and lips from them directly: every p/b/m closes, every "oo" rounds,
+on time, whatever the voice. Brows, eyes and head still come from the network.
 """
 import functools
 
 import numpy as np
 
 from puppet import speaker
+from puppet.alignment import align
+from puppet.errors import PuppetError
 from puppet.features import MOTION_FPS, SAMPLE_RATE, motion_frame_count
-from puppet.landmarks import from_face_units
+from puppet.landmarks import JAW, MOUTH, from_face_units
 from puppet.motion import Motion, resample
 from puppet.predictor import MODEL_FILES, Predictor, default_model
+from puppet.visemes import mouth_motion
 
 
 @functools.cache
@@ -60,19 +68,47 @@ def pause_weights(samples: np.ndarray) -> np.ndarray:
     return weights
 
 
-def speech_offsets(samples: np.ndarray, predictor: Predictor, embedding: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+SPOKEN_POINTS = [*JAW, *MOUTH]  # the landmarks a transcript's phones move
+
+
+def read_transcript(path) -> str:
+    """The words of a transcript file (UTF-8 text)."""
+    try:
+        return open(path, encoding="utf-8").read()
+    except OSError as error:
+        raise PuppetError(f"cannot read the transcript {path}: {error.strerror}") from None
+    except UnicodeDecodeError:
+        raise PuppetError(f"the transcript {path} is not UTF-8 text") from None
+
+
+def spoken_mouth(offsets: np.ndarray, samples: np.ndarray, transcript: str) -> np.ndarray:
+    """(T, 68, 3) canonical offsets (face units, MOTION_FPS) with the jaw and lips replaced by the
+    articulation of `transcript`'s phones, aligned to (N,) float32 16 kHz speech (T = motion_frame_count(N))."""
+    spoken = offsets.copy()
+    spoken[:, SPOKEN_POINTS] = mouth_motion(align(samples, transcript), len(offsets))[:, SPOKEN_POINTS]
+    return spoken
+
+
+def speech_offsets(samples: np.ndarray, predictor: Predictor, embedding: np.ndarray | None = None,
+                   transcript: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The network's answer for (N,) float32 16 kHz mono speech, at rest in its pauses: canonical
     offsets (T, 68, 3) in face units and head rotation (T, 3) radians, at MOTION_FPS. embedding: the
-    voice's (256,) speaker embedding when already known."""
+    voice's (256,) speaker embedding when already known; transcript: the words spoken, when known
+    (the jaw and lips then follow their phones, see spoken_mouth)."""
     embedding = speaker.embed(samples) if embedding is None else embedding
     offsets, rotation = predictor.predict(samples, embedding, SAMPLE_RATE)
-    return offsets * pause_weights(samples)[:, None, None], rotation
+    offsets = offsets * pause_weights(samples)[:, None, None]
+    if transcript is not None:
+        offsets = spoken_mouth(offsets, samples, transcript)
+    return offsets, rotation
 
 
-def learned_motion(samples: np.ndarray, rest: np.ndarray, fps: float, frames: int, predictor: Predictor | None = None) -> Motion:
+def learned_motion(samples: np.ndarray, rest: np.ndarray, fps: float, frames: int, predictor: Predictor | None = None,
+                   transcript: str | None = None) -> Motion:
     """Motion of `frames` frames at `fps` for (N,) float32 16 kHz speech on a face with (68, 3)
-    rest landmarks (pixels): mouth and expression offsets and head rotation, no translation."""
-    offsets, rotation = speech_offsets(samples, predictor or shipped_predictor("offline"))
+    rest landmarks (pixels): mouth and expression offsets and head rotation, no translation.
+    transcript: the words spoken, when known (see spoken_mouth)."""
+    offsets, rotation = speech_offsets(samples, predictor or shipped_predictor("offline"), transcript=transcript)
     return Motion(
         offsets=from_face_units(resample(offsets, MOTION_FPS, fps, frames), rest),
         rotation=resample(rotation, MOTION_FPS, fps, frames),

@@ -37,6 +37,7 @@ class VideoOptions:
     loudness: LoudnessOptions = field(default_factory=LoudnessOptions)  # the baseline's settings
     life: LifeOptions = field(default_factory=LifeOptions)  # blinks, idle head motion, breathing
     expression: str = "neutral"  # a mood held through the clip (puppet.expression.EXPRESSIONS)
+    transcript: str | None = None  # the words spoken: the learned motion's jaw and lips follow their phones
 
 
 def default_motion() -> str:
@@ -53,6 +54,8 @@ def output_size(image_size: tuple[int, int], max_side: int = DEFAULT_MAX_SIDE) -
 def make_motion(puppet: Puppet, audio_path: Path | None, options: VideoOptions) -> Motion:
     """The puppet's motion from the chosen source, at options.fps."""
     rest = puppet.rig.landmarks
+    if options.transcript is not None and options.motion != "learned":
+        raise PuppetError("a transcript drives the learned motion only, not --motion loudness or a track")
     if options.motion in MOTION_SOURCES:
         if audio_path is None:
             raise PuppetError(f"the {options.motion} motion needs an audio file")
@@ -62,7 +65,7 @@ def make_motion(puppet: Puppet, audio_path: Path | None, options: VideoOptions) 
             if not lipsync.has_model():
                 raise PuppetError("this install has no trained lip-sync model: run `puppet train`, or use --motion loudness")
             frames = frame_count(len(samples), audio.ANALYSIS_RATE, options.fps)
-            speech = lipsync.learned_motion(samples, rest, options.fps, frames)
+            speech = lipsync.learned_motion(samples, rest, options.fps, frames, transcript=options.transcript)
         else:
             speech = loudness_motion(samples, audio.ANALYSIS_RATE, rest, options.fps, options.loudness)
         activity = _activity(speech)

@@ -1,5 +1,4 @@
 """The `puppet` command as a user meets it: bad input ends in one line and exit 2, nothing left behind."""
-import importlib.util
 import wave
 
 import cv2
@@ -185,7 +184,9 @@ def test_a_bad_option_is_one_line(capsys):
     assert exit_.value.code == 2 and len(err.splitlines()) == 1 and "--fps" in err and "--help" in err
 
 
-def test_eval_without_the_aligner_names_the_extra(capsys, monkeypatch):
-    find_spec = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "pocketsphinx" else find_spec(name, *a))
-    fails(capsys, ["eval", "--labels", "3"], "puppet[train]")
+def test_bad_transcripts(files, capsys, demo_speech):
+    out = files["dir"] / "out.mp4"
+    fails(capsys, ["render", "--demo", "--transcript", files["dir"] / "missing.txt", "-o", out], "cannot read the transcript")
+    text = demo_speech.with_suffix(".txt")
+    fails(capsys, ["render", "--demo", "--motion", "loudness", "--transcript", text, "-o", out], "learned motion only")
+    assert not out.exists()

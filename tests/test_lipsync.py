@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from puppet import audio, lipsync
+from puppet.errors import PuppetError
 from puppet.evaluate import lip_opening
 from puppet.features import motion_frame_count
 from puppet.landmarks import face_scale
@@ -72,3 +73,36 @@ def test_the_mouth_rests_in_a_noisy_pause(demo, demo_speech):
     gap = opening(demo, np.concatenate([speech, hiss, speech]))
     start = int(len(speech) / 16000 * FPS)
     assert np.abs(gap[start + 8 : start + int(1.5 * FPS) - 8]).max() < 0.002  # the network alone leaves ~0.008
+
+
+def test_a_transcript_moves_the_jaw_and_lips_phone_by_phone(demo_speech):
+    """With its transcript, the demo's every p/b/m shuts the lips and its vowels open them; brows, eyes
+    and head stay the network's."""
+    from puppet.alignment import align
+    from puppet.features import MOTION_FPS
+    from puppet.visemes import canonical_rest
+
+    samples, text = audio.load(demo_speech), lipsync.read_transcript(demo_speech.with_suffix(".txt"))
+    predictor = lipsync.shipped_predictor("offline")
+    heard, rotation = lipsync.speech_offsets(samples, predictor)
+    spoken, spoken_rotation = lipsync.speech_offsets(samples, predictor, transcript=text)
+    others = [i for i in range(68) if i not in lipsync.SPOKEN_POINTS]
+    assert np.array_equal(spoken[:, others], heard[:, others]) and np.array_equal(spoken_rotation, rotation)
+    gap = lip_opening(canonical_rest()[None] + spoken) - lip_opening(canonical_rest()[None])  # IOD, from rest
+    phones = align(samples, text)
+    middle = {p.phone: [] for p in phones}
+    for p in phones:
+        middle[p.phone].append(int((p.start + p.end) / 2 * MOTION_FPS))
+    closures = middle["P"] + middle["B"] + middle["M"]
+    assert len(closures) >= 6  # Pip, puppet, me, picture, blob, much, ...
+    assert gap[closures].max() < -0.04  # shut: the rest gap closed
+    assert gap[middle["AE"] + middle["AH"] + middle["AA"]].max() > 0.15  # open
+    assert np.abs(gap[: int(phones[0].end * MOTION_FPS) // 2]).max() < 1e-3  # at rest before the first word
+
+
+def test_transcripts_are_read_as_text(tmp_path):
+    with pytest.raises(PuppetError, match="cannot read the transcript"):
+        lipsync.read_transcript(tmp_path / "missing.txt")
+    (tmp_path / "binary.txt").write_bytes(bytes(range(128, 256)))
+    with pytest.raises(PuppetError, match="not UTF-8"):
+        lipsync.read_transcript(tmp_path / "binary.txt")
