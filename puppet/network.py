@@ -35,7 +35,7 @@ import torch
 from torch import nn
 
 from puppet.features import FRAMES_PER_MOTION, N_MELS
-from puppet.landmarks import FACIAL_PARTS, N_LANDMARKS
+from puppet.landmarks import FACIAL_PARTS, INNER_LIP, N_LANDMARKS
 
 N_INPUT = N_MELS * FRAMES_PER_MOTION  # 160 log-mel values per motion step
 N_OFFSETS = N_LANDMARKS * 3  # 204
@@ -278,6 +278,22 @@ def velocity_loss(predicted: torch.Tensor, target: torch.Tensor, mask: torch.Ten
     per_pair = difference.square().sum((-1, -2))
     pairs = mask[:, 1:] * mask[:, :-1]
     return (per_pair * pairs).sum() / pairs.sum().clamp(min=1.0)
+
+
+def mouth_area(points: torch.Tensor) -> torch.Tensor:
+    """(...,) area of the inner-lip polygon (60–67) of (..., 68, ≥2) points, in the x-y plane (shoelace)."""
+    ring = points[..., list(INNER_LIP), :2]
+    x, y = ring[..., 0], ring[..., 1]
+    return 0.5 * (x * y.roll(-1, dims=-1) - x.roll(-1, dims=-1) * y).sum(-1).abs()
+
+
+def mouth_area_loss(predicted: torch.Tensor, target: torch.Tensor, rest: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """|A(rest + p) − A(rest + p̂)| per frame, the inner mouth's area (IOD²), averaged over masked frames.
+    predicted, target: (B, T, 68, 3) offsets from rest (68, 3); mask: (B, T). (Not in MakeItTalk: it aims
+    at the paper's D-A; an absolute error, as D-A is, so that an unsure network leans to the likelier
+    shape, shut or open, rather than to a half-open average.)"""
+    per_frame = (mouth_area(rest + predicted) - mouth_area(rest + target)).abs()
+    return (per_frame * mask).sum() / mask.sum().clamp(min=1.0)
 
 
 def laplacian_loss(predicted: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

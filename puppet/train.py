@@ -48,6 +48,7 @@ from puppet.network import (
     laplacian_loss,
     lsgan_generator_loss,
     lsgan_losses,
+    mouth_area_loss,
     parameter_count,
     phone_loss,
     position_loss,
@@ -55,6 +56,7 @@ from puppet.network import (
     velocity_loss,
 )
 from puppet.predictor import N_STEP, SILENCE, audio_steps
+from puppet.visemes import canonical_rest
 
 MODEL_VERSION = "1"  # bump when the exported inputs, outputs or their meaning change
 CHECKPOINT = "checkpoint.pt"
@@ -84,6 +86,7 @@ class TrainConfig:
     rotation_weight: float = 10.0  # head rotation (radians²) against landmark positions (IOD², summed over 68)
     content_weight: float = 0.5  # the content branch alone must fit the targets too: it carries the mouth
     velocity_weight: float = 5.0  # frame-to-frame velocity error (IOD² per frame pair, summed over 68) against positions
+    mouth_weight: float = 0.5  # absolute error of the inner mouth's area (IOD²) against positions; 0: none (see mouth_area_loss)
     gan: bool = True  # train the speaker branch against the LSGAN discriminator of Eq. 10–12
     gan_weight: float = 0.01  # μ_s of Eq. 12
     grad_clip: float = 1.0
@@ -318,11 +321,17 @@ def generator_losses(model: Network, batch: dict, config: TrainConfig, discrimin
         "content_laplacian": laplacian_loss(content, batch["offsets"], mask),
         "velocity": velocity_loss(offsets, batch["offsets"], mask),
     }
+    if config.mouth_weight > 0:
+        rest = torch.from_numpy(canonical_rest()).to(offsets.device)
+        terms["mouth"] = mouth_area_loss(offsets, batch["offsets"], rest, mask)
+        terms["content_mouth"] = mouth_area_loss(content, batch["offsets"], rest, mask)
     total = (
         terms["position"] + config.laplacian_weight * terms["laplacian"] + config.rotation_weight * terms["rotation"]
         + config.content_weight * (terms["content_position"] + config.laplacian_weight * terms["content_laplacian"])
         + config.velocity_weight * terms["velocity"]
     )
+    if config.mouth_weight > 0:
+        total = total + config.mouth_weight * (terms["mouth"] + config.content_weight * terms["content_mouth"])
     if out.phones is not None and config.phone_weight > 0:
         logits = out.phones[:, lookahead:]
         terms["phone"] = phone_loss(logits, batch["phones"], mask)
@@ -609,6 +618,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--tempo-changes", type=float, default=defaults.tempo_changes, help=f"share of training windows sped up or slowed down ({TEMPO_RANGE[0]}–{TEMPO_RANGE[1]}×; default {defaults.tempo_changes})")
     parser.add_argument("--phone-weight", type=float, default=defaults.phone_weight, help=f"weight of the auxiliary phone-classification loss (default {defaults.phone_weight}; 0: none)")
     parser.add_argument("--velocity-weight", type=float, default=defaults.velocity_weight, help=f"weight of the frame-to-frame velocity loss (default {defaults.velocity_weight})")
+    parser.add_argument("--mouth-weight", type=float, default=defaults.mouth_weight, help=f"weight of the inner-mouth area loss (default {defaults.mouth_weight}; 0: none)")
     parser.add_argument("--threads", type=int, default=defaults.threads)
     parser.add_argument("--device", default=defaults.device, help="torch device, e.g. cuda (default cpu)")
     return parser
@@ -619,7 +629,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         corpus=args.corpus, out=args.out, steps=args.steps, batch_size=args.batch_size,
         sequence_frames=args.sequence_frames, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
         checkpoint_every=args.checkpoint_every, gan=not args.no_gan, threads=args.threads, device=args.device,
-        feature_augment=not args.no_feature_augment, velocity_weight=args.velocity_weight, tempo_changes=args.tempo_changes,
+        feature_augment=not args.no_feature_augment, velocity_weight=args.velocity_weight, mouth_weight=args.mouth_weight, tempo_changes=args.tempo_changes,
         phone_weight=args.phone_weight,
         network=NetworkConfig(dropout=args.dropout, lookahead=args.lookahead, phone_classes=classifier_size(args.phone_weight)),
     )

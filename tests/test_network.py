@@ -9,6 +9,8 @@ from puppet.network import (
     NetworkConfig,
     laplacian_loss,
     lsgan_losses,
+    mouth_area,
+    mouth_area_loss,
     position_loss,
     velocity_loss,
 )
@@ -100,6 +102,32 @@ def test_velocity_loss():
     assert velocity_loss(jitter, target, mask) == pytest.approx(2 * 0.01 / 5, rel=1e-4)
     mask[:, 3] = 0  # both pairs touching frame 3 drop out
     assert velocity_loss(jitter, target, mask) < 1e-9
+
+
+def test_mouth_area_loss():
+    """The inner-lip polygon's area, as evaluate.mouth_area measures it; its loss is the mean absolute
+    area error over masked frames and ignores motion that keeps the area (a shift, other landmarks)."""
+    import numpy as np
+
+    from puppet import evaluate
+    from puppet.visemes import canonical_rest
+
+    rest = torch.from_numpy(canonical_rest())
+    g = torch.Generator().manual_seed(3)
+    target = 0.05 * torch.randn(1, 4, 68, 3, generator=g)
+    assert np.allclose(mouth_area(rest + target)[0].numpy(), evaluate.mouth_area((rest + target)[0].numpy()), atol=1e-7)
+    mask = torch.ones(1, 4)
+    assert mouth_area_loss(target + torch.tensor([0.2, -0.1, 0.3]), target, rest, mask) < 1e-6
+    brows = target.clone()
+    brows[:, :, 17:27] += 0.1
+    assert mouth_area_loss(brows, target, rest, mask) == 0
+    opened = target.clone()
+    opened[:, 2, 65:68, 1] += 0.1  # frame 2: the lower inner lip drops
+    gain = float(mouth_area(rest + opened)[0, 2] - mouth_area(rest + target)[0, 2])
+    assert gain > 0
+    assert float(mouth_area_loss(opened, target, rest, mask)) == pytest.approx(gain / 4, rel=1e-5)
+    mask[:, 2] = 0
+    assert mouth_area_loss(opened, target, rest, mask) == 0
 
 
 def test_discriminator_and_lsgan():
