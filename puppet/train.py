@@ -321,16 +321,15 @@ def generator_losses(model: Network, batch: dict, config: TrainConfig, discrimin
         "content_laplacian": laplacian_loss(content, batch["offsets"], mask),
         "velocity": velocity_loss(offsets, batch["offsets"], mask),
     }
-    if config.mouth_weight > 0:
-        rest = torch.from_numpy(canonical_rest()).to(offsets.device)
-        terms["mouth"] = mouth_area_loss(offsets, batch["offsets"], rest, mask)
-        terms["content_mouth"] = mouth_area_loss(content, batch["offsets"], rest, mask)
     total = (
         terms["position"] + config.laplacian_weight * terms["laplacian"] + config.rotation_weight * terms["rotation"]
         + config.content_weight * (terms["content_position"] + config.laplacian_weight * terms["content_laplacian"])
         + config.velocity_weight * terms["velocity"]
     )
     if config.mouth_weight > 0:
+        rest = torch.from_numpy(canonical_rest()).to(offsets.device)
+        terms["mouth"] = mouth_area_loss(offsets, batch["offsets"], rest, mask)
+        terms["content_mouth"] = mouth_area_loss(content, batch["offsets"], rest, mask)
         total = total + config.mouth_weight * (terms["mouth"] + config.content_weight * terms["content_mouth"])
     if out.phones is not None and config.phone_weight > 0:
         logits = out.phones[:, lookahead:]
