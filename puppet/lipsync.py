@@ -19,6 +19,7 @@ training targets moves the jaw and lips from them directly: every p/b/m closes, 
 on time, whatever the voice. Brows, eyes and head still come from the network.
 """
 import functools
+import re
 
 import numpy as np
 
@@ -71,14 +72,25 @@ def pause_weights(samples: np.ndarray) -> np.ndarray:
 SPOKEN_POINTS = [*JAW, *MOUTH]  # the landmarks a transcript's phones move
 
 
+SUBTITLE_CUE = re.compile(r"^\s*(WEBVTT|NOTE\b)|-->")  # headers, notes and timing lines of .srt/.vtt
+SUBTITLE_TAG = re.compile(r"<[^>]*>|\{[^}]*\}")  # <i>, <c.yellow>, {\an8}
+
+
 def read_transcript(path) -> str:
-    """The words of a transcript file (UTF-8 text)."""
+    """The words of a transcript file: plain UTF-8 text, or subtitles (.srt, .vtt) whose headers,
+    cue numbers or names (the line before a timing), timings and styling tags are dropped."""
     try:
-        return open(path, encoding="utf-8").read()
+        text = open(path, encoding="utf-8-sig").read()
     except OSError as error:
         raise PuppetError(f"cannot read the transcript {path}: {error.strerror}") from None
     except UnicodeDecodeError:
         raise PuppetError(f"the transcript {path} is not UTF-8 text") from None
+    if str(path).lower().endswith((".srt", ".vtt")):
+        lines = text.splitlines()
+        timing = ["-->" in line for line in lines]
+        text = "\n".join(SUBTITLE_TAG.sub(" ", line) for i, line in enumerate(lines)
+                         if not SUBTITLE_CUE.search(line) and not (i + 1 < len(lines) and timing[i + 1]))
+    return text
 
 
 def spoken_mouth(offsets: np.ndarray, samples: np.ndarray, transcript: str) -> np.ndarray:

@@ -106,3 +106,12 @@ def test_transcripts_are_read_as_text(tmp_path):
     (tmp_path / "binary.txt").write_bytes(bytes(range(128, 256)))
     with pytest.raises(PuppetError, match="not UTF-8"):
         lipsync.read_transcript(tmp_path / "binary.txt")
+    srt = tmp_path / "talk.srt"
+    srt.write_text("1\n00:00:00,000 --> 00:00:02,500\nHi! I'm <i>Pip</i>.\n\n2\n00:00:02,500 --> 00:00:04,000\n{\\an8}Give me 42.\n")
+    assert lipsync.read_transcript(srt).split() == ["Hi!", "I'm", "Pip", ".", "Give", "me", "42."]
+    vtt = tmp_path / "talk.vtt"
+    vtt.write_text("WEBVTT\n\nNOTE by hand\n\nintro\n00:00.000 --> 00:02.500 align:start\n<c.yellow>Hi</c> there\n")
+    assert lipsync.read_transcript(vtt).split() == ["Hi", "there"]
+    plain = tmp_path / "talk.txt"
+    plain.write_text("Scene 2 --> the cat\n")
+    assert lipsync.read_transcript(plain) == "Scene 2 --> the cat\n"  # plain text is taken as it is
