@@ -72,7 +72,7 @@ def pause_weights(samples: np.ndarray) -> np.ndarray:
 SPOKEN_POINTS = [*JAW, *MOUTH]  # the landmarks a transcript's phones move
 
 
-SUBTITLE_CUE = re.compile(r"^\s*(WEBVTT|NOTE\b)|-->")  # headers, notes and timing lines of .srt/.vtt
+SUBTITLE_HEADER = re.compile(r"\s*(WEBVTT|NOTE\b)")  # a .vtt file's header and its notes
 SUBTITLE_TAG = re.compile(r"<[^>]*>|\{[^}]*\}")  # <i>, <c.yellow>, {\an8}
 
 
@@ -87,9 +87,10 @@ def read_transcript(path) -> str:
         raise PuppetError(f"the transcript {path} is not UTF-8 text") from None
     if str(path).lower().endswith((".srt", ".vtt")):
         lines = text.splitlines()
-        timing = ["-->" in line for line in lines]
+        timings = {i for i, line in enumerate(lines) if "-->" in line}
+        cues = timings | {i - 1 for i in timings}  # each timing line and the cue number or name above it
         text = "\n".join(SUBTITLE_TAG.sub(" ", line) for i, line in enumerate(lines)
-                         if not SUBTITLE_CUE.search(line) and not (i + 1 < len(lines) and timing[i + 1]))
+                         if i not in cues and not SUBTITLE_HEADER.match(line))
     return text
 
 
