@@ -11,15 +11,21 @@ alignment is retried with 5 ms frames instead of 10 ms (`SEARCHES`). The phones'
 turned into seconds, silences are labelled SIL, and holes and the tail up to the end of the
 audio are filled with SIL, so the phones tile [0, duration] exactly.
 
+Forced alignment fits any words to any audio. `align_checked` also says where they fit badly: a
+free phone loop (any phone may follow any, as in the "allphone" search) decodes the same audio,
+and wherever the transcript's acoustic score, averaged over FIT_WINDOW_SECONDS, falls more than
+POOR_FIT below the loop's, the words there are unlikely to be the ones spoken.
+
 The acoustic model and dictionary ship in the pocketsphinx wheel (US English, CMU ARPAbet without
 stress marks, 39 phones + SIL).
 """
 import functools
 import re
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
-from pocketsphinx import Decoder
+from pocketsphinx import Decoder, get_model_path
 
 from puppet.errors import PuppetError
 
@@ -39,6 +45,15 @@ PAD_NOISE = 1e-4  # standard deviation of that noise, full scale 1.0 (-80 dBFS):
 # phones shorter than the acoustic model's 3 states of 10 ms each, as in very fast speech.
 WIDE_BEAMS = {"beam": 1e-120, "pbeam": 1e-120, "wbeam": 1e-100}
 SEARCHES = (WIDE_BEAMS, {**WIDE_BEAMS, "frate": 200})
+PHONE_LOOP = Path(get_model_path("en-us")) / "en-us-phone.lm.bin"  # the free phone loop's phone bigrams
+# The transcript-fit check (see align_checked). Scores are pocketsphinx's acoustic log-likelihoods
+# (log base 1.0001) per second of audio, averaged over FIT_WINDOW_SECONDS. With the right words
+# (four real readers, the demo, 40 held-out synthetic voices with noise and reverberation added)
+# the worst window trails the free loop by 870 to 4,900; with another utterance's words, by 3,500
+# to 12,800 (29 of 35 beyond POOR_FIT; 10 more did not align at all). Swapping one sentence of the
+# demo for other words is found at the swap.
+FIT_WINDOW_SECONDS = 1.0
+POOR_FIT = -5500.0
 
 # Letter groups → phones, tried longest first, for words the dictionary lacks.
 GRAPHEMES = {
@@ -120,12 +135,14 @@ class Aligner:
 
     def __init__(self):
         self.decoders: list[Decoder] = []  # made on first need, one per entry of SEARCHES
+        self.phone_loops: list[Decoder] = []  # the same, searching a free phone loop
 
-    def _decoder(self, attempt: int) -> Decoder:
-        while len(self.decoders) <= attempt:
-            settings = SEARCHES[len(self.decoders)]
-            self.decoders.append(Decoder(samprate=SAMPLE_RATE, bestpath=False, loglevel="FATAL", **settings))
-        return self.decoders[attempt]
+    def _decoder(self, attempt: int, phone_loop: bool = False) -> Decoder:
+        decoders = self.phone_loops if phone_loop else self.decoders
+        while len(decoders) <= attempt:
+            settings = SEARCHES[len(decoders)] | ({"allphone": str(PHONE_LOOP)} if phone_loop else {"bestpath": False})
+            decoders.append(Decoder(samprate=SAMPLE_RATE, loglevel="FATAL", **settings))
+        return decoders[attempt]
 
     def align(self, samples: np.ndarray, text: str) -> list[Phone]:
         """Phones of `text` spoken in `samples`, tiling [0, len(samples) / SAMPLE_RATE] without gaps.
@@ -133,30 +150,71 @@ class Aligner:
         samples: (N,) float32 mono in [-1, 1] at SAMPLE_RATE (16 kHz).
         Raises PuppetError if the transcript is empty or cannot be aligned to the audio.
         """
+        aligned, attempt = self._forced(samples, text)
+        return self._phones(aligned, attempt, len(samples) / SAMPLE_RATE)
+
+    def align_checked(self, samples: np.ndarray, text: str) -> tuple[list[Phone], list[tuple[float, float]]]:
+        """(phones as `align` gives them, [(start, end) seconds] of the stretches of audio where the
+        words fit poorly: spoken differently or not at all, or words spoken that the text lacks)."""
+        aligned, attempt = self._forced(samples, text)
+        duration = len(samples) / SAMPLE_RATE
+        loop = self._decoder(attempt, phone_loop=True)
+        _decode(loop, _padded_pcm(samples))
+        free = [(segment.start_frame, segment.end_frame + 1, loop.get_logmath().log(segment.ascore)) for segment in loop.seg()]
+        spans = _poor_fits([(start, end, score) for _, start, end, score in aligned], free, int(loop.config["frate"]))
+        misfits = [(max(self._seconds(attempt, start), 0.0), min(self._seconds(attempt, end), duration)) for start, end in spans]
+        return self._phones(aligned, attempt, duration), [(start, end) for start, end in misfits if end > start]
+
+    def _forced(self, samples: np.ndarray, text: str) -> tuple[list[tuple[str, int, int, float]], int]:
+        """(_align's phones, the index of the SEARCHES entry that aligned them); PuppetError if none does."""
         words = normalise(text)
         if not words:
             raise PuppetError(f"nothing to align: the transcript {text!r} has no words")
-        duration = len(samples) / SAMPLE_RATE
         raw = _padded_pcm(samples)
         for attempt in range(len(SEARCHES)):
-            decoder = self._decoder(attempt)
             try:
-                aligned = _align(decoder, words, raw)
-                break
+                return _align(self._decoder(attempt), words, raw), attempt
             except RuntimeError as error:
                 reason = error
-        else:
-            raise PuppetError(f"cannot align {duration:.2f} s of audio to {text[:60]!r}: {reason}")
-        hop = SAMPLE_RATE // int(decoder.config["frate"])  # samples per frame
+        raise PuppetError(f"cannot align {len(samples) / SAMPLE_RATE:.2f} s of audio to {text[:60]!r}: {reason}")
 
-        def seconds(frame):  # into the unpadded audio
-            return (frame * hop - PAD_SAMPLES) / SAMPLE_RATE
+    def _seconds(self, attempt: int, frame: int) -> float:
+        """Seconds into the unpadded audio of a frame of SEARCHES[attempt]'s decode of the padded audio."""
+        hop = SAMPLE_RATE // int(self._decoder(attempt).config["frate"])  # samples per frame
+        return (frame * hop - PAD_SAMPLES) / SAMPLE_RATE
 
-        return _tile([(_phone_name(name), seconds(start), seconds(end)) for name, start, end in aligned], duration)
+    def _phones(self, aligned: list[tuple[str, int, int, float]], attempt: int, duration: float) -> list[Phone]:
+        """_align's phones as Phones tiling [0, duration] seconds."""
+        return _tile([(_phone_name(name), self._seconds(attempt, start), self._seconds(attempt, end))
+                      for name, start, end, _ in aligned], duration)
 
 
-def _align(decoder: Decoder, words: list[str], raw: bytes) -> list[tuple[str, int, int]]:
-    """(phone, start frame, end frame) of the words in 16-bit PCM; RuntimeError if they do not fit."""
+def _poor_fits(aligned: list[tuple[int, int, float]], free: list[tuple[int, int, float]], frame_rate: int) -> list[tuple[int, int]]:
+    """[start, end) frame runs where the forced alignment's acoustic score, averaged over a window of
+    FIT_WINDOW_SECONDS, trails the free phone loop's by more than POOR_FIT per second; runs less
+    than a window apart are merged.
+
+    aligned, free: (start frame, end frame, acoustic score) of each phone of either decode.
+    """
+    frames = max(end for _, end, _ in aligned + free)
+    deficit = np.zeros(frames)
+    for spans, sign in ((aligned, 1.0), (free, -1.0)):
+        for start, end, score in spans:
+            if end > start:
+                deficit[start:end] += sign * score / (end - start)
+    window = round(FIT_WINDOW_SECONDS * frame_rate)
+    per_second = np.convolve(deficit, np.full(window, frame_rate / window), mode="same")
+    poor = np.r_[False, per_second < POOR_FIT, False]
+    runs: list[tuple[int, int]] = []
+    for start, end in np.flatnonzero(poor[1:] != poor[:-1]).reshape(-1, 2).tolist():
+        if runs and start - runs[-1][1] < window:
+            start = runs.pop()[0]
+        runs.append((start, end))
+    return runs
+
+
+def _align(decoder: Decoder, words: list[str], raw: bytes) -> list[tuple[str, int, int, float]]:
+    """(phone, start frame, end frame, acoustic score) of the words in 16-bit PCM; RuntimeError if they do not fit."""
     for word in words:
         if decoder.lookup_word(word) is None:
             decoder.add_word(word, guess_pronunciation(word), True)
@@ -166,7 +224,7 @@ def _align(decoder: Decoder, words: list[str], raw: bytes) -> list[tuple[str, in
         raise RuntimeError("no alignment path reaches the end of the audio")
     decoder.set_alignment()
     _decode(decoder, raw)
-    aligned = [(phone.name, phone.start, phone.start + phone.duration)
+    aligned = [(phone.name, phone.start, phone.start + phone.duration, phone.score)
                for word in decoder.get_alignment() for phone in word]
     if not aligned:
         raise RuntimeError("no phones")
@@ -231,3 +289,9 @@ def align(samples: np.ndarray, text: str) -> list[Phone]:
     Uses one decoder per process, loaded on first use.
     """
     return _default_aligner().align(samples, text)
+
+
+def align_checked(samples: np.ndarray, text: str) -> tuple[list[Phone], list[tuple[float, float]]]:
+    """Phones of `text` in (N,) float32 16 kHz `samples` and the (start, end) seconds where the words
+    fit the audio poorly; see `Aligner.align_checked`."""
+    return _default_aligner().align_checked(samples, text)

@@ -2,10 +2,11 @@
 import argparse
 import os
 import sys
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
-from puppet.errors import NoFaceError, PuppetError
+from puppet.errors import NoFaceError, PuppetError, PuppetWarning
 from puppet.template import POINTS_HELP
 
 EXPRESSION_NAMES = ("neutral", "happy", "angry", "surprised", "sad")  # puppet.expression.EXPRESSIONS, without importing numpy for --help
@@ -273,7 +274,9 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return run(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return run(args)
     except PuppetError as error:
         print(f"puppet: error: {error}", file=sys.stderr)
         return 2
@@ -285,6 +288,14 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"puppet: internal error: {type(error).__name__}: {error} (set PUPPET_DEBUG=1 for details)", file=sys.stderr)
         return 1
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """PuppetWarnings as one line, like errors; other warnings as Python shows them."""
+    if issubclass(category, PuppetWarning):
+        print(f"puppet: warning: {message}", file=sys.stderr)
+    else:
+        print(warnings.formatwarning(message, category, filename, lineno, line), file=file or sys.stderr, end="")
 
 
 def _predict(args: argparse.Namespace) -> int:

@@ -1,8 +1,12 @@
-"""The one exception type users see: its message is printed as a single line by the CLI."""
+"""The one exception type users see, and the one warning type: the CLI prints each message as a single line."""
 
 
 class PuppetError(Exception):
     """Bad input or an impossible request; the message says what is wrong and what to do."""
+
+
+class PuppetWarning(UserWarning):
+    """Something the user should know that does not stop the work; the CLI prints it as one line."""
 
 
 class NoFaceError(PuppetError):

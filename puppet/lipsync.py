@@ -20,12 +20,13 @@ on time, whatever the voice. Brows, eyes and head still come from the network.
 """
 import functools
 import re
+import warnings
 
 import numpy as np
 
 from puppet import speaker
-from puppet.alignment import align
-from puppet.errors import PuppetError
+from puppet.alignment import align_checked
+from puppet.errors import PuppetError, PuppetWarning
 from puppet.features import MOTION_FPS, SAMPLE_RATE, motion_frame_count
 from puppet.landmarks import JAW, MOUTH, from_face_units
 from puppet.motion import Motion, resample
@@ -94,12 +95,28 @@ def read_transcript(path) -> str:
     return text
 
 
+MISFITS_NAMED = 3  # a poorly fitting transcript's warning names this many stretches of audio
+
+
 def spoken_mouth(offsets: np.ndarray, samples: np.ndarray, transcript: str) -> np.ndarray:
     """(T, 68, 3) canonical offsets (face units, MOTION_FPS) with the jaw and lips replaced by the
-    articulation of `transcript`'s phones, aligned to (N,) float32 16 kHz speech (T = motion_frame_count(N))."""
+    articulation of `transcript`'s phones, aligned to (N,) float32 16 kHz speech (T = motion_frame_count(N)).
+    Warns (PuppetWarning) where the words fit the audio poorly: the mouth follows them there all the same."""
+    phones, misfits = align_checked(samples, transcript)
+    if misfits:
+        named = ", ".join(f"{clock(start)}–{clock(end)}" for start, end in misfits[:MISFITS_NAMED])
+        more = f" and {len(misfits) - MISFITS_NAMED} more" if len(misfits) > MISFITS_NAMED else ""
+        warnings.warn(PuppetWarning(f"the transcript does not fit the audio at {named}{more}: are those the words spoken? "
+                                    "The mouth follows the transcript there all the same"), stacklevel=2)
     spoken = offsets.copy()
-    spoken[:, SPOKEN_POINTS] = mouth_motion(align(samples, transcript), len(offsets))[:, SPOKEN_POINTS]
+    spoken[:, SPOKEN_POINTS] = mouth_motion(phones, len(offsets))[:, SPOKEN_POINTS]
     return spoken
+
+
+def clock(seconds: float) -> str:
+    """m:ss.s: 75.25 → "1:15.2"."""
+    minutes, seconds = divmod(round(seconds, 1), 60)
+    return f"{int(minutes)}:{seconds:04.1f}"
 
 
 def speech_offsets(samples: np.ndarray, predictor: Predictor, embedding: np.ndarray | None = None,

@@ -8,7 +8,7 @@ import pytest
 from conftest import SHARED_MEDIA
 
 from puppet import audio
-from puppet.alignment import PHONES, SILENCE, align, guess_pronunciation, normalise
+from puppet.alignment import PHONES, SILENCE, _poor_fits, align, align_checked, guess_pronunciation, normalise
 from puppet.errors import PuppetError
 
 REFERENCES = sorted((SHARED_MEDIA / "speech").glob("*.phone.json"))
@@ -82,3 +82,24 @@ def test_impossible_alignments_raise_a_clear_error():
         align(np.zeros(16000, np.float32), "?!")
     with pytest.raises(PuppetError, match="cannot align"):
         align(np.zeros(800, np.float32), "the quick brown fox jumps over the lazy dog again and again")
+
+
+def test_the_right_words_fit_and_other_words_are_found_where_they_are(demo_speech):
+    samples, text = audio.load(demo_speech), demo_speech.with_suffix(".txt").read_text()
+    phones, misfits = align_checked(samples, text)
+    assert phones == align(samples, text) and misfits == []
+    sentence = text.split(".")[1]
+    assert sentence.split()[0] == "Give" and text.split(".")[2].split()[0] == "Who"
+    start = next(p.start for p in phones if p.phone == "G")  # "Give me any picture and a voice, and watch me talk."
+    end = next(p.start for p in phones if p.phone == "HH" and p.start > start)  # "Who ..."
+    swapped = text.replace(sentence, " The quick brown fox jumps over the lazy dog", 1)
+    (misfit,) = align_checked(samples, swapped)[1]
+    assert start <= misfit[0] and misfit[1] <= end and misfit[1] - misfit[0] > 1.0
+
+
+def test_poor_fits_are_runs_of_a_low_windowed_score_with_near_runs_merged():
+    free = [(0, 600, 0.0)]
+    aligned = [(0, 100, 0.0), (100, 150, -150 * 50.0), (150, 170, 0.0), (170, 220, -150 * 50.0), (220, 600, 0.0)]
+    ((start, end),) = _poor_fits(aligned, free, frame_rate=100)  # -15,000 a second over 1 s windows, in two bursts
+    assert 50 < start < 150 and 170 < end < 270  # within half a window of the bursts
+    assert _poor_fits([(0, 600, -20.0 * 600)], free, frame_rate=100) == []  # -2,000 a second throughout: fits

@@ -184,6 +184,16 @@ def test_a_bad_option_is_one_line(capsys):
     assert exit_.value.code == 2 and len(err.splitlines()) == 1 and "--fps" in err and "--help" in err
 
 
+def test_a_transcript_of_other_words_is_warned_of_in_one_line(files, capsys, demo_speech):
+    text = demo_speech.with_suffix(".txt").read_text()
+    other = files["dir"] / "other.txt"
+    other.write_text(text.replace(text.split(".")[1], " The quick brown fox jumps over the lazy dog", 1))
+    out = files["dir"] / "motion.npz"
+    assert main(["predict", str(demo_speech), "--transcript", str(other), "-o", str(out)]) == 0
+    (warning,) = capsys.readouterr().err.strip().splitlines()
+    assert warning.startswith("puppet: warning: the transcript does not fit the audio at 0:0") and out.is_file()
+
+
 def test_bad_transcripts(files, capsys, demo_speech):
     out = files["dir"] / "out.mp4"
     fails(capsys, ["render", "--demo", "--transcript", files["dir"] / "missing.txt", "-o", out], "cannot read the transcript")
