@@ -12,10 +12,13 @@ Every position is in image pixels, origin top-left, x right, y down, z toward th
 """
 from dataclasses import dataclass
 
+import functools
+
 import numpy as np
 from scipy.spatial import Delaunay
 
 from puppet import landmarks as lm
+from puppet import template
 from puppet.errors import PuppetError
 from puppet.motion import Motion
 from puppet.pose import head_pivot, move_points
@@ -49,9 +52,12 @@ TOPOLOGY_MOUTH_OPENING = 0.4
 MOUTH_COORDS = {60: (0.0, 0.0, 0.0), 61: (0.25, 0.0, 1.0), 62: (0.5, 0.0, 1.0), 63: (0.75, 0.0, 1.0),
                 64: (1.0, 0.0, 0.0), 65: (0.75, 1.0, 0.0), 66: (0.5, 1.0, 0.0), 67: (0.25, 1.0, 0.0)}
 
-# Fold guard: a triangle (other than mouth and eye triangles, which may close) must keep this
-# fraction of its rest area; otherwise the frame's head motion, then its offsets, are scaled back.
+# Fold guard: a triangle (other than those of the mouth, lips and eyes, which may close) must keep
+# this fraction of its rest area; otherwise the frame's head motion, then its offsets, are scaled back.
 MIN_AREA_RATIO = 0.05
+# Triangles that may close (mouth, eyes, lips) may turn over by this much area, IOD²: a lip drawn as
+# a line crossing itself by about 1 % of the eye distance, too little to see.
+FLIP_TOLERANCE = 0.002
 GUARD_STEPS = 8
 
 
@@ -105,6 +111,13 @@ class Rig:
             coords[index] = uv
         return coords
 
+    def fitted(self, offsets: np.ndarray) -> np.ndarray:
+        """(T, 68, 3) pixel offsets made for the canonical face's mouth, fitted to the mouth drawn here:
+        mouth corners tied, closing stretched for lips drawn apart, lips drawn thin kept thin, lips
+        asked to cross stopped where they meet."""
+        offsets = _keep_drawn_lip_thickness(self.landmarks, _tie_mouth_corners(offsets))
+        return _close_overlapping_lips(self.landmarks, _shut_drawn_open_lips(self.landmarks, offsets))
+
     def animate(self, motion: Motion) -> np.ndarray:
         """(T, N, 2) float32 screen positions (image pixels) of every vertex for each frame.
 
@@ -112,7 +125,7 @@ class Rig:
         neck pivot (orthographic projection); border vertices stay put. Frames that would
         fold a triangle have their head motion, then their offsets, scaled back until none does.
         """
-        offsets = _close_overlapping_lips(self.landmarks, _tie_mouth_corners(motion.offsets))
+        offsets = self.fitted(motion.offsets)
         target = self._place(motion, offsets, 1.0, 1.0)
         bad = np.flatnonzero(self._folded(target))
         for frame in bad:
@@ -137,13 +150,14 @@ class Rig:
 
     def _folded(self, positions: np.ndarray) -> np.ndarray:
         """(T,) bool: frames where a triangle shrinks below MIN_AREA_RATIO of its rest area or
-        flips; mouth and eye triangles may shrink to zero but not flip."""
+        flips; triangles inside the mouth or an eye, and those of the lips (corners of the mouth
+        included), may shrink to zero but not flip: lips close and thin to a line."""
         rest = _signed_areas(self.vertices[None, :, :2], self.triangles)[0]
         areas = _signed_areas(positions, self.triangles)
         floor = MIN_AREA_RATIO * rest
-        closable = np.zeros(len(self.triangles), bool)
-        closable[self.mouth] = closable[self.eyes] = True
-        floor[closable] = -1e-3 * rest.max()
+        closable = np.isin(self.triangles, lm.MOUTH).all(axis=1)
+        closable[self.eyes] = True
+        floor[closable] = -FLIP_TOLERANCE * lm.face_scale(self.landmarks) ** 2
         return np.any(areas < floor, axis=1)
 
     def _largest_safe(self, place) -> float:
@@ -207,15 +221,92 @@ UPPER_LIP = [49, 50, 51, 52, 53, 61, 62, 63]
 LOWER_LIP = [55, 56, 57, 58, 59, 65, 66, 67]
 
 
+def _lip_gap(points: np.ndarray, down: np.ndarray) -> np.ndarray:
+    """Mean distance along the (2,) `down` axis from the upper to the lower inner lip of (..., 68, ≥2)
+    points (or, of offsets, how much they widen that gap): shape (...)."""
+    upper, lower = (list(side) for side in zip(*lm.INNER_LIP_PAIRS))
+    return np.mean((points[..., lower, :2] - points[..., upper, :2]) @ down, axis=-1)
+
+
+@functools.cache
+def canonical_lip_gap() -> float:
+    """The mean face's inner-lip gap at rest (0.10 IOD): the rest every motion source's offsets are made for."""
+    face = template.MEAN_FACE
+    return float(_lip_gap(face, lm.face_axes(face)[1])) / lm.face_scale(face)
+
+
+def _shut_drawn_open_lips(rest: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(T, 68, 3) offsets for a portrait drawn with its lips further apart than the canonical face's
+    (an open smile, a shout: most cartoons): motions that close the lips are stretched by the ratio of
+    the two gaps, so that lips shutting on the canonical face shut on this one too; motions that open
+    them are kept as they are. The further closing moves both lips toward each other, fully between
+    the outermost inner-lip pairs and tapering to nothing at the mouth corners (which stay where the
+    motion puts them). Portraits drawn with a gap no wider than the canonical one are left alone."""
+    x_axis, down = lm.face_axes(rest)
+    drawn, canonical = float(_lip_gap(rest, down)), canonical_lip_gap() * lm.face_scale(rest)
+    if drawn <= canonical:
+        return offsets
+    closing = np.minimum(_lip_gap(offsets, down), 0.0)  # (T,) pixels, ≤ 0
+    extra = closing * (drawn / canonical - 1.0)  # (T,) pixels of further closing, ≤ 0
+    x = rest[:, :2] @ x_axis
+    corners = np.sort(x[list(lm.MOUTH_CORNERS)])
+    sides = np.sort(x[[pair[0] for pair in lm.INNER_LIP_PAIRS]])[[0, -1]]
+    weight = np.interp(x, [corners[0], sides[0], sides[1], corners[1]], [0.0, 1.0, 1.0, 0.0])  # (68,)
+    shift = (extra[:, None] * weight[None, :] / 2)[..., None] * np.append(down, 0.0)  # (T, 68, 3)
+    offsets = offsets.copy()
+    offsets[:, UPPER_LIP] -= shift[:, UPPER_LIP]
+    offsets[:, LOWER_LIP] += shift[:, LOWER_LIP]
+    return offsets
+
+
+# Each lip's outer points, and the inner-lip curve (corner to corner) across the lip from them.
+LIPS = {
+    "upper": ([49, 50, 51, 52, 53], [60, 61, 62, 63, 64]),
+    "lower": ([55, 56, 57, 58, 59], [64, 65, 66, 67, 60]),
+}
+
+
+def _lip_thickness(points: np.ndarray, lip: str) -> np.ndarray:
+    """(5,) thickness of the (68, ≥2) face's upper or lower lip at each of its outer points, IOD units,
+    down the face to the inner-lip curve straight across (< 0 where the inner lip was drawn beyond
+    the outer one)."""
+    down = lm.face_axes(points)[1]
+    outer, inner = LIPS[lip]
+    across = _across(points, lip) @ (points[inner, :2] @ down)
+    sign = 1.0 if lip == "upper" else -1.0  # the upper lip's inner edge lies below its outer edge
+    return sign * (across - points[outer, :2] @ down) / lm.face_scale(points)
+
+
+def _across(points: np.ndarray, lip: str) -> np.ndarray:
+    """(5, 5) weights: row i interpolates values given at the lip's inner-curve points at its i-th
+    outer point, piecewise-linearly along the (68, ≥2) face's x axis (held at the ends)."""
+    outer, inner = LIPS[lip]
+    x = points[:, :2] @ lm.face_axes(points)[0]
+    order = np.argsort(x[inner])
+    return np.stack([np.interp(x[outer], x[inner][order], column[order]) for column in np.eye(len(inner))], axis=1)
+
+
+def _keep_drawn_lip_thickness(rest: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(T, 68, 3) offsets for a portrait whose lips are drawn thinner than the canonical face's (in
+    cartoons often a single line: inner and outer lip points together): each outer lip point moves
+    with the inner lip straight across from it (the inner lip's offsets interpolated along it), but
+    for the fraction (drawn / canonical thickness there) of their canonical difference, so a drawn
+    lip keeps its thickness instead of turning inside out."""
+    offsets = offsets.copy()
+    for lip, (outer, inner) in LIPS.items():
+        keep = np.clip(_lip_thickness(rest, lip) / _lip_thickness(template.MEAN_FACE, lip), 0.0, 1.0)[:, None]  # (5, 1)
+        across = np.einsum("ok,tkc->toc", _across(rest, lip), offsets[:, inner])  # (T, 5, 3)
+        offsets[:, outer] = across + keep * (offsets[:, outer] - across)
+    return offsets
+
+
 def _close_overlapping_lips(rest: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """(T, 68, 3) offsets where lips asked to close past each other (a closed portrait given a
     motion that closes a more open face) stop where they meet: both lips are moved back apart
     by half the mean overlap each, then any inner-lip pair still crossed meets at its midpoint."""
     offsets = offsets.copy()
     down = lm.face_axes(rest)[1]
-    upper, lower = (list(side) for side in zip(*lm.INNER_LIP_PAIRS))
-    gap = ((rest[lower, :2] + offsets[:, lower, :2]) - (rest[upper, :2] + offsets[:, upper, :2])) @ down  # (T, 3)
-    overlap = np.maximum(0.0, -gap.mean(axis=1))[:, None, None] * np.append(down, 0.0)  # (T, 1, 3)
+    overlap = np.maximum(0.0, -_lip_gap(rest[None] + offsets, down))[:, None, None] * np.append(down, 0.0)  # (T, 1, 3)
     offsets[:, UPPER_LIP] -= overlap / 2
     offsets[:, LOWER_LIP] += overlap / 2
     for upper, lower in lm.INNER_LIP_PAIRS:

@@ -60,6 +60,51 @@ def test_lips_asked_to_cross_meet_instead(demo):
         assert positions[lower, 1] >= positions[upper, 1] - 1e-3
 
 
+def test_a_mouth_drawn_open_shuts_where_the_canonical_mouth_shuts(demo):
+    """Most cartoons are drawn mid-smile: offsets that close the canonical face's rest gap (0.10 IOD)
+    shut their lips too; offsets that open the mouth are not stretched; a mouth drawn shut is left alone."""
+    assert rigging.canonical_lip_gap() == pytest.approx(0.10, abs=0.005)
+    points = demo.rig.landmarks.copy()
+    scale = lm.face_scale(points)
+    points[list(range(55, 60)) + [65, 66, 67] + list(range(5, 12)), 1] += 0.3 * scale  # jaw and lower lip drawn 0.3 IOD lower
+    rig = rigging.build(points, demo.rig.image_size)
+    still = Motion.still(3, 25)
+    offsets = still.offsets.copy()
+    offsets[0, [65, 66, 67], 1] -= rigging.canonical_lip_gap() * scale  # the canonical lips shut
+    offsets[1, [65, 66, 67], 1] -= 0.5 * rigging.canonical_lip_gap() * scale  # half-way
+    offsets[2, list(range(55, 60)) + [65, 66, 67] + list(range(5, 12)), 1] += 0.2 * scale  # jaw opened wider
+    positions = rig.animate(Motion(offsets, still.rotation, still.translation, 25))
+    gap = rigging._lip_gap(positions, lm.face_axes(points)[1]) / scale
+    drawn = float(rigging._lip_gap(points, lm.face_axes(points)[1])) / scale
+    assert gap[0] == pytest.approx(0.0, abs=0.01) and gap[1] == pytest.approx(drawn / 2, abs=0.01)
+    assert gap[2] == pytest.approx(drawn + 0.2, abs=0.01)
+    assert not rig._folded(positions).any()
+    shut = demo.rig.animate(Motion(offsets, still.rotation, still.translation, 25))  # drawn with lips together
+    assert np.allclose(shut[2, [65, 66, 67]] - demo.rig.landmarks[[65, 66, 67], :2], offsets[2, [65, 66, 67], :2], atol=1e-4)
+
+
+def test_lips_drawn_as_lines_open_round_and_shut_without_folding(demo):
+    """A cartoon mouth drawn as an open outline (outer lip points on the inner ones) follows a
+    canonical "ah, m, oo" as drawn lips should: no frame needs the fold guard, the lips shut on m."""
+    from puppet.alignment import Phone
+    from puppet.visemes import mouth_motion
+
+    points = demo.rig.landmarks.copy()
+    scale = lm.face_scale(points)
+    points[list(range(55, 60)) + [65, 66, 67] + list(range(5, 12)), 1] += 0.25 * scale  # drawn open
+    for lip, (outer, inner) in rigging.LIPS.items():  # lips drawn as lines: outer points almost on the inner curve
+        points[outer, 1] += 0.9 * (rigging._across(points, lip) @ points[inner, 1] - points[outer, 1])
+    assert np.abs(rigging._lip_thickness(points, "upper")).max() < 0.02
+    rig = rigging.build(points, demo.rig.image_size)
+    phones = [Phone("SIL", 0.0, 0.2), Phone("AA", 0.2, 0.4), Phone("M", 0.4, 0.55), Phone("UW", 0.55, 0.8), Phone("SIL", 0.8, 1.0)]
+    offsets = lm.from_face_units(mouth_motion(phones, 50), points)
+    still = Motion.still(len(offsets), 50)
+    assert not rig._folded(rig._place(still, rig.fitted(offsets), 1.0, 1.0)).any()
+    gap = rigging._lip_gap(rig.animate(Motion(offsets, still.rotation, still.translation, 50)), lm.face_axes(points)[1]) / scale
+    drawn = float(rigging._lip_gap(points, lm.face_axes(points)[1])) / scale
+    assert gap[int(0.475 * 50)] < 0.15 * drawn and gap[int(0.3 * 50)] > drawn + 0.1
+
+
 def test_crossed_lips_in_a_landmark_file_are_mended(demo):
     points = demo.rig.landmarks.copy()
     points[[61, 62, 63], 1] += 3  # upper inner lip drawn below the lower one
