@@ -11,6 +11,10 @@ alignment is retried with 5 ms frames instead of 10 ms (`SEARCHES`). The phones'
 turned into seconds, silences are labelled SIL, and holes and the tail up to the end of the
 audio are filled with SIL, so the phones tile [0, duration] exactly.
 
+Subtitles bring their own times: `align_cues` aligns each cue's words only within its own
+stretch of audio (a little beyond it where the neighbouring cues leave room), so a line that was
+cut, ad-libbed or mistimed upsets that cue alone, not the rest of a long narration.
+
 Forced alignment fits any words to any audio. `align_checked` also says where they fit badly: a
 free phone loop (any phone may follow any, as in the "allphone" search) decodes the same audio,
 and wherever the transcript's acoustic score, averaged over FIT_WINDOW_SECONDS, falls more than
@@ -54,6 +58,7 @@ PHONE_LOOP = Path(get_model_path("en-us")) / "en-us-phone.lm.bin"  # the free ph
 # demo for other words is found at the swap.
 FIT_WINDOW_SECONDS = 1.0
 POOR_FIT = -5500.0
+CUE_MARGIN = 0.5  # seconds: a subtitle's words are looked for this far beyond its times, short of the neighbouring cues'
 
 # Letter groups → phones, tried longest first, for words the dictionary lacks.
 GRAPHEMES = {
@@ -76,12 +81,30 @@ SYMBOLS = {"&": " and ", "%": " percent ", "+": " plus ", "@": " at "}
 
 
 @dataclass(frozen=True)
+class Cue:
+    """One subtitle: words said between two times."""
+
+    start: float  # seconds from the start of the audio
+    end: float
+    text: str
+
+
+@dataclass(frozen=True)
 class Phone:
     """One aligned phone."""
 
     phone: str  # CMU ARPAbet without stress ("AA", "P", ...), or SIL
     start: float  # seconds from the start of the audio
     end: float  # seconds; the next phone starts here
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """Words placed in audio, and where not to trust them."""
+
+    phones: list[Phone]  # tiling [0, duration] of the audio
+    misfits: list[tuple[float, float]]  # (start, end) seconds where the words fit the audio poorly
+    unsaid: list[tuple[float, float]]  # (start, end) seconds no words were given for (outside every subtitle cue)
 
 
 def number_words(n: int) -> str:
@@ -153,9 +176,9 @@ class Aligner:
         aligned, attempt = self._forced(samples, text)
         return self._phones(aligned, attempt, len(samples) / SAMPLE_RATE)
 
-    def align_checked(self, samples: np.ndarray, text: str) -> tuple[list[Phone], list[tuple[float, float]]]:
-        """(phones as `align` gives them, [(start, end) seconds] of the stretches of audio where the
-        words fit poorly: spoken differently or not at all, or words spoken that the text lacks)."""
+    def align_checked(self, samples: np.ndarray, text: str) -> Alignment:
+        """The phones `align` gives and the stretches of audio where the words fit poorly: spoken
+        differently or not at all, or words spoken that the text lacks."""
         aligned, attempt = self._forced(samples, text)
         duration = len(samples) / SAMPLE_RATE
         loop = self._decoder(attempt, phone_loop=True)
@@ -163,7 +186,34 @@ class Aligner:
         free = [(segment.start_frame, segment.end_frame + 1, loop.get_logmath().log(segment.ascore)) for segment in loop.seg()]
         spans = _poor_fits([(start, end, score) for _, start, end, score in aligned], free, int(loop.config["frate"]))
         misfits = [(max(self._seconds(attempt, start), 0.0), min(self._seconds(attempt, end), duration)) for start, end in spans]
-        return self._phones(aligned, attempt, duration), [(start, end) for start, end in misfits if end > start]
+        return Alignment(self._phones(aligned, attempt, duration), [(start, end) for start, end in misfits if end > start], [])
+
+    def align_cues(self, samples: np.ndarray, cues: tuple[Cue, ...]) -> Alignment:
+        """`align_checked` for subtitles: each cue's words aligned within its own times (CUE_MARGIN
+        beyond them where its neighbours leave room); a cue that cannot be aligned there is a poor
+        fit over its whole stretch, and the audio outside every cue is unsaid."""
+        duration = len(samples) / SAMPLE_RATE
+        cues = sorted((cue for cue in cues if normalise(cue.text)), key=lambda cue: cue.start)
+        spoken, misfits, unsaid, said_until = [], [], [], 0.0
+        for i, cue in enumerate(cues):
+            start = max(cue.start - CUE_MARGIN, said_until)
+            end = min(cue.end + CUE_MARGIN, cues[i + 1].start if i + 1 < len(cues) else duration, duration)
+            if end - start < FIT_WINDOW_SECONDS / 10:
+                continue  # a cue wholly outside the audio, or inside the one before
+            if start - said_until > MIN_PHONE_SECONDS:
+                unsaid.append((said_until, start))
+            said_until = end
+            window = samples[round(start * SAMPLE_RATE):round(end * SAMPLE_RATE)]
+            try:
+                aligned = self.align_checked(window, cue.text)
+            except PuppetError:
+                misfits.append((start, end))
+                continue
+            spoken += [(p.phone, start + p.start, start + p.end) for p in aligned.phones if p.phone != SILENCE]
+            misfits += [(start + a, start + b) for a, b in aligned.misfits]
+        if duration - said_until > MIN_PHONE_SECONDS:
+            unsaid.append((said_until, duration))
+        return Alignment(_tile(spoken, duration), misfits, unsaid)
 
     def _forced(self, samples: np.ndarray, text: str) -> tuple[list[tuple[str, int, int, float]], int]:
         """(_align's phones, the index of the SEARCHES entry that aligned them); PuppetError if none does."""
@@ -291,7 +341,9 @@ def align(samples: np.ndarray, text: str) -> list[Phone]:
     return _default_aligner().align(samples, text)
 
 
-def align_checked(samples: np.ndarray, text: str) -> tuple[list[Phone], list[tuple[float, float]]]:
-    """Phones of `text` in (N,) float32 16 kHz `samples` and the (start, end) seconds where the words
-    fit the audio poorly; see `Aligner.align_checked`."""
-    return _default_aligner().align_checked(samples, text)
+def align_checked(samples: np.ndarray, words: str | tuple[Cue, ...]) -> Alignment:
+    """`words` (a transcript, or timed subtitle cues) placed in (N,) float32 16 kHz `samples`; see
+    `Aligner.align_checked` and `Aligner.align_cues`."""
+    if isinstance(words, str):
+        return _default_aligner().align_checked(samples, words)
+    return _default_aligner().align_cues(samples, words)

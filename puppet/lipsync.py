@@ -25,13 +25,13 @@ import warnings
 import numpy as np
 
 from puppet import speaker
-from puppet.alignment import align_checked
+from puppet.alignment import Cue, align_checked
 from puppet.errors import PuppetError, PuppetWarning
 from puppet.features import MOTION_FPS, SAMPLE_RATE, motion_frame_count
 from puppet.landmarks import JAW, MOUTH, from_face_units
 from puppet.motion import Motion, resample
 from puppet.predictor import MODEL_FILES, Predictor, default_model
-from puppet.visemes import mouth_motion
+from puppet.visemes import frame_times, mouth_motion
 
 
 @functools.cache
@@ -73,43 +73,64 @@ def pause_weights(samples: np.ndarray) -> np.ndarray:
 SPOKEN_POINTS = [*JAW, *MOUTH]  # the landmarks a transcript's phones move
 
 
-SUBTITLE_HEADER = re.compile(r"\s*(WEBVTT|NOTE\b)")  # a .vtt file's header and its notes
 SUBTITLE_TAG = re.compile(r"<[^>]*>|\{[^}]*\}")  # <i>, <c.yellow>, {\an8}
+SUBTITLE_TIME = r"(?:(\d+):)?(\d{1,2}):(\d{1,2})[.,](\d{1,3})"  # [hh:]mm:ss,mmm (.srt) or [hh:]mm:ss.mmm (.vtt)
+SUBTITLE_TIMING = re.compile(rf"\s*{SUBTITLE_TIME}\s*-->\s*{SUBTITLE_TIME}")
+MISFITS_NAMED = 3  # a poorly fitting transcript's warning names this many stretches of audio
+MISFIT_EASE = 0.1  # seconds over which the mouth passes between the transcript's and the network's
 
 
-def read_transcript(path) -> str:
-    """The words of a transcript file: plain UTF-8 text, or subtitles (.srt, .vtt) whose headers,
-    cue numbers or names (the line before a timing), timings and styling tags are dropped."""
+def read_transcript(path) -> str | tuple[Cue, ...]:
+    """The words of a transcript file: plain UTF-8 text as it is, or the cues of subtitles (.srt,
+    .vtt): each timing with the text lines under it, styling tags dropped (headers, notes and cue
+    numbers or names are not under a timing)."""
     try:
         text = open(path, encoding="utf-8-sig").read()
     except OSError as error:
         raise PuppetError(f"cannot read the transcript {path}: {error.strerror}") from None
     except UnicodeDecodeError:
         raise PuppetError(f"the transcript {path} is not UTF-8 text") from None
-    if str(path).lower().endswith((".srt", ".vtt")):
-        lines = text.splitlines()
-        timings = {i for i, line in enumerate(lines) if "-->" in line}
-        cues = timings | {i - 1 for i in timings}  # each timing line and the cue number or name above it
-        text = "\n".join(SUBTITLE_TAG.sub(" ", line) for i, line in enumerate(lines)
-                         if i not in cues and not SUBTITLE_HEADER.match(line))
-    return text
+    if not str(path).lower().endswith((".srt", ".vtt")):
+        return text
+    cues, lines = [], text.splitlines()
+    for i, line in enumerate(lines):
+        if "-->" not in line:
+            continue
+        timing = SUBTITLE_TIMING.match(line)
+        if timing is None:
+            raise PuppetError(f"cannot read the subtitle timing {line.strip()!r} in {path}")
+        fields = [int(value or 0) for value in timing.groups()]
+        start, end = (h * 3600 + m * 60 + s + int(f"{ms:<03}") / 1000 for h, m, s, ms in (fields[:4], fields[4:]))
+        words = []
+        for below in lines[i + 1:]:
+            if not below.strip() or "-->" in below:
+                break
+            words.append(SUBTITLE_TAG.sub(" ", below))
+        cues.append(Cue(start, end, " ".join(words)))
+    if not cues:
+        raise PuppetError(f"no subtitle cues (lines like 00:00:01,000 --> 00:00:02,500) in {path}")
+    return tuple(cues)
 
 
-MISFITS_NAMED = 3  # a poorly fitting transcript's warning names this many stretches of audio
-
-
-def spoken_mouth(offsets: np.ndarray, samples: np.ndarray, transcript: str) -> np.ndarray:
+def spoken_mouth(offsets: np.ndarray, samples: np.ndarray, transcript: str | tuple[Cue, ...]) -> np.ndarray:
     """(T, 68, 3) canonical offsets (face units, MOTION_FPS) with the jaw and lips replaced by the
-    articulation of `transcript`'s phones, aligned to (N,) float32 16 kHz speech (T = motion_frame_count(N)).
-    Warns (PuppetWarning) where the words fit the audio poorly: the mouth follows them there all the same."""
-    phones, misfits = align_checked(samples, transcript)
-    if misfits:
-        named = ", ".join(f"{clock(start)}–{clock(end)}" for start, end in misfits[:MISFITS_NAMED])
-        more = f" and {len(misfits) - MISFITS_NAMED} more" if len(misfits) > MISFITS_NAMED else ""
+    articulation of the transcript's phones (plain text, or timed subtitle cues), aligned to (N,)
+    float32 16 kHz speech (T = motion_frame_count(N)). Where the words fit the audio poorly (with a
+    PuppetWarning), and outside every subtitle cue, the jaw and lips stay the network's, eased in
+    and out over MISFIT_EASE."""
+    aligned = align_checked(samples, transcript)
+    if aligned.misfits:
+        named = ", ".join(f"{clock(start)}–{clock(end)}" for start, end in aligned.misfits[:MISFITS_NAMED])
+        more = f" and {len(aligned.misfits) - MISFITS_NAMED} more" if len(aligned.misfits) > MISFITS_NAMED else ""
         warnings.warn(PuppetWarning(f"the transcript does not fit the audio at {named}{more}: are those the words spoken? "
-                                    "The mouth follows the transcript there all the same"), stacklevel=2)
+                                    "The mouth follows the sound there instead"), stacklevel=2)
+    times = frame_times(len(offsets))
+    heard = np.zeros(len(offsets))
+    for start, end in aligned.misfits + aligned.unsaid:
+        heard = np.maximum(heard, np.clip(np.minimum(times - start, end - times) / MISFIT_EASE + 1.0, 0.0, 1.0))
+    said = mouth_motion(aligned.phones, len(offsets))
     spoken = offsets.copy()
-    spoken[:, SPOKEN_POINTS] = mouth_motion(phones, len(offsets))[:, SPOKEN_POINTS]
+    spoken[:, SPOKEN_POINTS] = heard[:, None, None] * offsets[:, SPOKEN_POINTS] + (1.0 - heard[:, None, None]) * said[:, SPOKEN_POINTS]
     return spoken
 
 
@@ -120,7 +141,7 @@ def clock(seconds: float) -> str:
 
 
 def speech_offsets(samples: np.ndarray, predictor: Predictor, embedding: np.ndarray | None = None,
-                   transcript: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   transcript: str | tuple[Cue, ...] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The network's answer for (N,) float32 16 kHz mono speech, at rest in its pauses: canonical
     offsets (T, 68, 3) in face units and head rotation (T, 3) radians, at MOTION_FPS. embedding: the
     voice's (256,) speaker embedding when already known; transcript: the words spoken, when known
@@ -134,7 +155,7 @@ def speech_offsets(samples: np.ndarray, predictor: Predictor, embedding: np.ndar
 
 
 def learned_motion(samples: np.ndarray, rest: np.ndarray, fps: float, frames: int, predictor: Predictor | None = None,
-                   transcript: str | None = None) -> Motion:
+                   transcript: str | tuple[Cue, ...] | None = None) -> Motion:
     """Motion of `frames` frames at `fps` for (N,) float32 16 kHz speech on a face with (68, 3)
     rest landmarks (pixels): mouth and expression offsets and head rotation, no translation.
     transcript: the words spoken, when known (see spoken_mouth)."""

@@ -10,6 +10,7 @@ import numpy as np
 from tqdm import tqdm
 
 from puppet import audio, export, lipsync, track
+from puppet.alignment import Cue
 from puppet.bundle import Puppet
 from puppet.errors import PuppetError
 from puppet.expression import expression_offsets
@@ -37,7 +38,7 @@ class VideoOptions:
     loudness: LoudnessOptions = field(default_factory=LoudnessOptions)  # the baseline's settings
     life: LifeOptions = field(default_factory=LifeOptions)  # blinks, idle head motion, breathing
     expression: str = "neutral"  # a mood held through the clip (puppet.expression.EXPRESSIONS)
-    transcript: str | None = None  # the words spoken: the learned motion's jaw and lips follow their phones
+    transcript: str | tuple[Cue, ...] | None = None  # the words spoken (text or subtitle cues): the learned motion's jaw and lips follow their phones
 
 
 def default_motion() -> str:

@@ -8,7 +8,7 @@ import pytest
 from conftest import SHARED_MEDIA
 
 from puppet import audio
-from puppet.alignment import PHONES, SILENCE, _poor_fits, align, align_checked, guess_pronunciation, normalise
+from puppet.alignment import PHONES, SILENCE, Cue, _poor_fits, align, align_checked, guess_pronunciation, normalise
 from puppet.errors import PuppetError
 
 REFERENCES = sorted((SHARED_MEDIA / "speech").glob("*.phone.json"))
@@ -86,14 +86,15 @@ def test_impossible_alignments_raise_a_clear_error():
 
 def test_the_right_words_fit_and_other_words_are_found_where_they_are(demo_speech):
     samples, text = audio.load(demo_speech), demo_speech.with_suffix(".txt").read_text()
-    phones, misfits = align_checked(samples, text)
-    assert phones == align(samples, text) and misfits == []
+    aligned = align_checked(samples, text)
+    phones = aligned.phones
+    assert phones == align(samples, text) and aligned.misfits == aligned.unsaid == []
     sentence = text.split(".")[1]
     assert sentence.split()[0] == "Give" and text.split(".")[2].split()[0] == "Who"
     start = next(p.start for p in phones if p.phone == "G")  # "Give me any picture and a voice, and watch me talk."
     end = next(p.start for p in phones if p.phone == "HH" and p.start > start)  # "Who ..."
     swapped = text.replace(sentence, " The quick brown fox jumps over the lazy dog", 1)
-    (misfit,) = align_checked(samples, swapped)[1]
+    (misfit,) = align_checked(samples, swapped).misfits
     assert start <= misfit[0] and misfit[1] <= end and misfit[1] - misfit[0] > 1.0
 
 
@@ -103,3 +104,33 @@ def test_poor_fits_are_runs_of_a_low_windowed_score_with_near_runs_merged():
     ((start, end),) = _poor_fits(aligned, free, frame_rate=100)  # -15,000 a second over 1 s windows, in two bursts
     assert 50 < start < 150 and 170 < end < 270  # within half a window of the bursts
     assert _poor_fits([(0, 600, -20.0 * 600)], free, frame_rate=100) == []  # -2,000 a second throughout: fits
+
+
+def demo_cues(demo_speech):
+    """The demo's three sentences as subtitle cues timed from its whole alignment (±0.1 s), and that alignment."""
+    samples, text = audio.load(demo_speech), demo_speech.with_suffix(".txt").read_text()
+    phones = align(samples, text)
+    starts = [next(p.start for p in phones if p.phone == first) for first in ("HH", "G")]
+    starts.append(next(p.start for p in phones if p.phone == "HH" and p.start > starts[1]))  # "Hi", "Give", "Who"
+    ends = [max(p.end for p in phones if p.phone != SILENCE and p.end <= nxt) for nxt in starts[1:] + [99.0]]
+    sentences = [sentence.strip() + "." for sentence in text.split(".") if sentence.strip()]
+    return samples, phones, [Cue(a - 0.1, b + 0.1, words) for a, b, words in zip(starts, ends, sentences)]
+
+
+def test_subtitle_cues_align_within_their_times_and_a_wrong_cue_upsets_only_itself(demo_speech):
+    samples, whole, cues = demo_cues(demo_speech)
+    assert len(cues) == 3 and cues[1].text.startswith("Give")
+    n = int(len(samples) / 16000 / FRAME)
+    aligned = align_checked(samples, tuple(cues))
+    phones = aligned.phones
+    assert_tiles(phones, len(samples) / 16000)
+    assert aligned.misfits == [] and aligned.unsaid == ([(0.0, cues[0].start - 0.5)] if cues[0].start > 0.5 else [])
+    agree = frame_labels([(p.phone, p.start, p.end) for p in phones], n) == frame_labels([(p.phone, p.start, p.end) for p in whole], n)
+    assert agree.mean() > 0.9
+    cues[1] = Cue(cues[1].start, cues[1].end, "The quick brown fox jumps over the lazy dog.")
+    aligned = align_checked(samples, tuple(cues))
+    phones, misfits = aligned.phones, aligned.misfits
+    assert misfits and all(cues[1].start - 0.5 <= a < b <= cues[1].end + 0.5 for a, b in misfits)
+    labels = frame_labels([(p.phone, p.start, p.end) for p in phones], n)
+    others = np.r_[0:int(cues[0].end / FRAME), int(cues[2].start / FRAME):n]
+    assert (labels == frame_labels([(p.phone, p.start, p.end) for p in whole], n))[others].mean() > 0.9

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from puppet import audio, lipsync
-from puppet.errors import PuppetError
+from puppet.errors import PuppetError, PuppetWarning
 from puppet.evaluate import lip_opening
 from puppet.features import motion_frame_count
 from puppet.landmarks import face_scale
@@ -100,6 +100,25 @@ def test_a_transcript_moves_the_jaw_and_lips_phone_by_phone(demo_speech):
     assert np.abs(gap[: int(phones[0].end * MOTION_FPS) // 2]).max() < 1e-3  # at rest before the first word
 
 
+def test_where_the_transcript_does_not_fit_the_mouth_follows_the_sound(demo_speech):
+    from puppet.alignment import Cue
+    from puppet.visemes import frame_times
+
+    samples, text = audio.load(demo_speech), lipsync.read_transcript(demo_speech.with_suffix(".txt"))
+    predictor = lipsync.shipped_predictor("offline")
+    heard, _ = lipsync.speech_offsets(samples, predictor)
+    duration = len(samples) / 16000
+    cues = (Cue(0.0, 2.1, text.split(".")[0]), Cue(2.1, 5.2, "The quick brown fox jumps over the lazy dog."),
+            Cue(5.2, duration, ".".join(text.split(".")[2:])))
+    with pytest.warns(PuppetWarning, match="does not fit the audio at 0:0[23]"):
+        spoken, _ = lipsync.speech_offsets(samples, predictor, transcript=cues)
+    times = frame_times(len(spoken))
+    mouth = lipsync.SPOKEN_POINTS
+    same = np.abs(spoken[:, mouth] - heard[:, mouth]).max(axis=(1, 2)) < 1e-6
+    assert same[(times > 3.2) & (times < 4.2)].all()  # inside the poor fit: the network's mouth
+    assert not same[times < 2.0].all() and not same[times > 5.5].all()  # elsewhere the subtitles' phones
+
+
 def test_transcripts_are_read_as_text(tmp_path):
     with pytest.raises(PuppetError, match="cannot read the transcript"):
         lipsync.read_transcript(tmp_path / "missing.txt")
@@ -107,11 +126,20 @@ def test_transcripts_are_read_as_text(tmp_path):
     with pytest.raises(PuppetError, match="not UTF-8"):
         lipsync.read_transcript(tmp_path / "binary.txt")
     srt = tmp_path / "talk.srt"
-    srt.write_text("1\n00:00:00,000 --> 00:00:02,500\nHi! I'm <i>Pip</i>.\n\n2\n00:00:02,500 --> 00:00:04,000\n{\\an8}Give me 42.\n")
-    assert lipsync.read_transcript(srt).split() == ["Hi!", "I'm", "Pip", ".", "Give", "me", "42."]
+    srt.write_text("1\n00:00:00,000 --> 00:00:02,500\nHi! I'm <i>Pip</i>.\n\n2\n01:00:02,5 --> 01:00:04,000\n{\\an8}Give me\n42.\n")
+    (hi, give) = lipsync.read_transcript(srt)
+    assert (hi.start, hi.end, hi.text.split()) == (0.0, 2.5, ["Hi!", "I'm", "Pip", "."])
+    assert (give.start, give.end, give.text.split()) == (3602.5, 3604.0, ["Give", "me", "42."])
     vtt = tmp_path / "talk.vtt"
-    vtt.write_text("WEBVTT\n\nNOTE by hand\n\nintro\n00:00.000 --> 00:02.500 align:start\n<c.yellow>Hi</c> there\n")
-    assert lipsync.read_transcript(vtt).split() == ["Hi", "there"]
+    vtt.write_text("WEBVTT\n\nNOTE by hand\n\nintro\n00:01.250 --> 00:02.500 align:start\n<c.yellow>Hi</c> there\n")
+    (cue,) = lipsync.read_transcript(vtt)
+    assert (cue.start, cue.end, cue.text.split()) == (1.25, 2.5, ["Hi", "there"])
+    (tmp_path / "bad.srt").write_text("1\n00:00:00 --> soon\nHi\n")
+    with pytest.raises(PuppetError, match="cannot read the subtitle timing"):
+        lipsync.read_transcript(tmp_path / "bad.srt")
+    (tmp_path / "empty.vtt").write_text("WEBVTT\n\n")
+    with pytest.raises(PuppetError, match="no subtitle cues"):
+        lipsync.read_transcript(tmp_path / "empty.vtt")
     plain = tmp_path / "talk.txt"
     plain.write_text("Scene 2 --> the cat\n")
     assert lipsync.read_transcript(plain) == "Scene 2 --> the cat\n"  # plain text is taken as it is
