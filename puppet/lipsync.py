@@ -73,7 +73,7 @@ def pause_weights(samples: np.ndarray) -> np.ndarray:
 SPOKEN_POINTS = [*JAW, *MOUTH]  # the landmarks a transcript's phones move
 
 
-SUBTITLE_TAG = re.compile(r"<[^>]*>|\{[^}]*\}")  # <i>, <c.yellow>, {\an8}
+SUBTITLE_TAG = re.compile(r"<[^>]*>|\{[^}]*\}|\[[^]]*]|\([^)]*\)|♪")  # <i>, <c.yellow>, {\an8}; [Music], (laughs), ♪
 SUBTITLE_TIME = r"(?:(\d+):)?(\d{1,2}):(\d{1,2})[.,](\d{1,3})"  # [hh:]mm:ss,mmm (.srt) or [hh:]mm:ss.mmm (.vtt)
 SUBTITLE_TIMING = re.compile(rf"\s*{SUBTITLE_TIME}\s*-->\s*{SUBTITLE_TIME}")
 MISFITS_NAMED = 3  # a poorly fitting transcript's warning names this many stretches of audio
@@ -82,8 +82,8 @@ MISFIT_EASE = 0.1  # seconds over which the mouth passes between the transcript'
 
 def read_transcript(path) -> str | tuple[Cue, ...]:
     """The words of a transcript file: plain UTF-8 text as it is, or the cues of subtitles (.srt,
-    .vtt): each timing with the text lines under it, styling tags dropped (headers, notes and cue
-    numbers or names are not under a timing)."""
+    .vtt): each timing with the text lines under it, styling tags and sound descriptions dropped
+    (headers, notes and cue numbers or names are not under a timing)."""
     try:
         text = open(path, encoding="utf-8-sig").read()
     except OSError as error:
@@ -99,8 +99,8 @@ def read_transcript(path) -> str | tuple[Cue, ...]:
         timing = SUBTITLE_TIMING.match(line)
         if timing is None:
             raise PuppetError(f"cannot read the subtitle timing {line.strip()!r} in {path}")
-        fields = [int(value or 0) for value in timing.groups()]
-        start, end = (h * 3600 + m * 60 + s + int(f"{ms:<03}") / 1000 for h, m, s, ms in (fields[:4], fields[4:]))
+        fields = timing.groups()
+        start, end = _subtitle_seconds(*fields[:4]), _subtitle_seconds(*fields[4:])
         words = []
         for below in lines[i + 1:]:
             if not below.strip() or "-->" in below:
@@ -110,6 +110,11 @@ def read_transcript(path) -> str | tuple[Cue, ...]:
     if not cues:
         raise PuppetError(f"no subtitle cues (lines like 00:00:01,000 --> 00:00:02,500) in {path}")
     return tuple(cues)
+
+
+def _subtitle_seconds(hours: str | None, minutes: str, seconds: str, fraction: str) -> float:
+    """Seconds of a subtitle time's fields: (None, "01", "02", "5") → 62.5."""
+    return int(hours or 0) * 3600 + int(minutes) * 60 + int(seconds) + int(fraction.ljust(3, "0")) / 1000
 
 
 def spoken_mouth(offsets: np.ndarray, samples: np.ndarray, transcript: str | tuple[Cue, ...]) -> np.ndarray:

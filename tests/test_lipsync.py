@@ -126,10 +126,11 @@ def test_transcripts_are_read_as_text(tmp_path):
     with pytest.raises(PuppetError, match="not UTF-8"):
         lipsync.read_transcript(tmp_path / "binary.txt")
     srt = tmp_path / "talk.srt"
-    srt.write_text("1\n00:00:00,000 --> 00:00:02,500\nHi! I'm <i>Pip</i>.\n\n2\n01:00:02,5 --> 01:00:04,000\n{\\an8}Give me\n42.\n")
-    (hi, give) = lipsync.read_transcript(srt)
+    srt.write_text("1\n00:00:00,000 --> 00:00:02,500\nHi! I'm <i>Pip</i>.\n\n2\n01:00:02,5 --> 01:00:04,050\n{\\an8}Give me [laughs]\n42. ♪\n\n3\n01:00:05,000 --> 01:00:09,000\n[Music]\n")
+    (hi, give, music) = lipsync.read_transcript(srt)
     assert (hi.start, hi.end, hi.text.split()) == (0.0, 2.5, ["Hi!", "I'm", "Pip", "."])
-    assert (give.start, give.end, give.text.split()) == (3602.5, 3604.0, ["Give", "me", "42."])
+    assert (give.start, give.end, give.text.split()) == (3602.5, 3604.05, ["Give", "me", "42."])
+    assert music.text.strip() == ""  # no words: the network's mouth there
     vtt = tmp_path / "talk.vtt"
     vtt.write_text("WEBVTT\n\nNOTE by hand\n\nintro\n00:01.250 --> 00:02.500 align:start\n<c.yellow>Hi</c> there\n")
     (cue,) = lipsync.read_transcript(vtt)
