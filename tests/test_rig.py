@@ -132,3 +132,24 @@ def test_every_shared_cartoon_rigs_cleanly(name):
     assert not rig._folded(opened)[0]
     mouth = areas(rig, opened)[0][rig.mouth].sum()
     assert mouth > areas(rig, rig.vertices[None, :, :2])[0][rig.mouth].sum()
+
+
+@pytest.mark.parametrize("name", CARTOONS)
+def test_every_shared_cartoon_opens_on_ah_and_closes_on_m(name):
+    """Drawn open or shut, thick-lipped or line-lipped: a canonical "ah, m, ah" opens the mouth
+    past its drawn gap and at least halves the gap of one drawn open."""
+    from puppet.alignment import Phone
+    from puppet.image import load_image
+    from puppet.visemes import mouth_motion
+
+    image = load_image(shared("cartoons", name))
+    points = lm.load(shared("cartoons", name.rsplit(".", 1)[0] + "_landmarks.txt"))
+    rig = rigging.build(points, (image.shape[1], image.shape[0]))
+    phones = [Phone("SIL", 0.0, 0.3), Phone("AA", 0.3, 0.5), Phone("M", 0.5, 0.65), Phone("AA", 0.65, 0.85), Phone("SIL", 0.85, 1.2)]
+    offsets = lm.from_face_units(mouth_motion(phones, 60), rig.landmarks)
+    still = Motion.still(len(offsets), 50)
+    down, scale = lm.face_axes(rig.landmarks)[1], lm.face_scale(rig.landmarks)
+    gap = rigging._lip_gap(rig.animate(Motion(offsets, still.rotation, still.translation, 50)), down) / scale
+    drawn = float(rigging._lip_gap(rig.landmarks, down)) / scale
+    assert gap[int(0.4 * 50)] > drawn + 0.1
+    assert gap[int(0.575 * 50)] < max(0.5 * drawn, 0.03)
