@@ -8,11 +8,14 @@ insides re-triangulated as strips, so the mouth opening and each eye are exact s
 triangles: the mouth triangles are drawn as a mouth interior, the eye triangles may
 collapse to nothing when the lids close.
 
+Motion is made for the canonical (mean human) face; `Rig.fitted` fits its mouth to the mouth as
+drawn: a mouth drawn open shuts where the canonical one would, lips drawn thin (a cartoon's line)
+keep their thickness, and lips never pass through each other.
+
 Every position is in image pixels, origin top-left, x right, y down, z toward the viewer.
 """
-from dataclasses import dataclass
-
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import Delaunay
