@@ -8,7 +8,16 @@ import pytest
 from conftest import SHARED_MEDIA
 
 from puppet import audio
-from puppet.alignment import PHONES, SILENCE, Cue, _poor_fits, align, align_checked, guess_pronunciation, normalise
+from puppet.alignment import (
+    PHONES,
+    SILENCE,
+    Cue,
+    _poor_fits,
+    align,
+    align_checked,
+    guess_pronunciation,
+    normalise,
+)
 from puppet.errors import PuppetError
 
 REFERENCES = sorted((SHARED_MEDIA / "speech").glob("*.phone.json"))
