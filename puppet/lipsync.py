@@ -21,6 +21,7 @@ on time, whatever the voice. Brows, eyes and head still come from the network.
 import functools
 import re
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -85,7 +86,7 @@ def read_transcript(path) -> str | tuple[Cue, ...]:
     .vtt): each timing with the text lines under it, styling tags and sound descriptions dropped
     (headers, notes and cue numbers or names are not under a timing)."""
     try:
-        text = open(path, encoding="utf-8-sig").read()
+        text = Path(path).read_text(encoding="utf-8-sig")
     except OSError as error:
         raise PuppetError(f"cannot read the transcript {path}: {error.strerror}") from None
     except UnicodeDecodeError:

@@ -118,8 +118,13 @@ class Rig:
         """(T, 68, 3) pixel offsets made for the canonical face's mouth, fitted to the mouth drawn here:
         mouth corners tied, closing stretched for lips drawn apart, lips drawn thin kept thin, lips
         asked to cross stopped where they meet."""
-        offsets = _keep_drawn_lip_thickness(self.landmarks, _tie_mouth_corners(offsets))
-        return _close_overlapping_lips(self.landmarks, _shut_drawn_open_lips(self.landmarks, offsets))
+        fit = self.mouth_fit
+        return _close_overlapping_lips(self.landmarks, fit.shut(fit.keep_thickness(_tie_mouth_corners(offsets))))
+
+    @functools.cached_property
+    def mouth_fit(self) -> "MouthFit":
+        """What `fitted` needs from the rest landmarks alone, made once (live calls `fitted` every frame)."""
+        return MouthFit.of(self.landmarks)
 
     def animate(self, motion: Motion) -> np.ndarray:
         """(T, N, 2) float32 screen positions (image pixels) of every vertex for each frame.
@@ -238,30 +243,6 @@ def canonical_lip_gap() -> float:
     return float(_lip_gap(face, lm.face_axes(face)[1])) / lm.face_scale(face)
 
 
-def _shut_drawn_open_lips(rest: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """(T, 68, 3) offsets for a portrait drawn with its lips further apart than the canonical face's
-    (an open smile, a shout: most cartoons): motions that close the lips are stretched by the ratio of
-    the two gaps, so that lips shutting on the canonical face shut on this one too; motions that open
-    them are kept as they are. The further closing moves both lips toward each other, fully between
-    the outermost inner-lip pairs and tapering to nothing at the mouth corners (which stay where the
-    motion puts them). Portraits drawn with a gap no wider than the canonical one are left alone."""
-    x_axis, down = lm.face_axes(rest)
-    drawn, canonical = float(_lip_gap(rest, down)), canonical_lip_gap() * lm.face_scale(rest)
-    if drawn <= canonical:
-        return offsets
-    closing = np.minimum(_lip_gap(offsets, down), 0.0)  # (T,) pixels, ≤ 0
-    extra = closing * (drawn / canonical - 1.0)  # (T,) pixels of further closing, ≤ 0
-    x = rest[:, :2] @ x_axis
-    corners = np.sort(x[list(lm.MOUTH_CORNERS)])
-    sides = np.sort(x[[pair[0] for pair in lm.INNER_LIP_PAIRS]])[[0, -1]]
-    weight = np.interp(x, [corners[0], sides[0], sides[1], corners[1]], [0.0, 1.0, 1.0, 0.0])  # (68,)
-    shift = (extra[:, None] * weight[None, :] / 2)[..., None] * np.append(down, 0.0)  # (T, 68, 3)
-    offsets = offsets.copy()
-    offsets[:, UPPER_LIP] -= shift[:, UPPER_LIP]
-    offsets[:, LOWER_LIP] += shift[:, LOWER_LIP]
-    return offsets
-
-
 # Each lip's outer points, and the inner-lip curve (corner to corner) across the lip from them.
 LIPS = {
     "upper": ([49, 50, 51, 52, 53], [60, 61, 62, 63, 64]),
@@ -289,18 +270,60 @@ def _across(points: np.ndarray, lip: str) -> np.ndarray:
     return np.stack([np.interp(x[outer], x[inner][order], column[order]) for column in np.eye(len(inner))], axis=1)
 
 
-def _keep_drawn_lip_thickness(rest: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """(T, 68, 3) offsets for a portrait whose lips are drawn thinner than the canonical face's (in
-    cartoons often a single line: inner and outer lip points together): each outer lip point moves
-    with the inner lip straight across from it (the inner lip's offsets interpolated along it), but
-    for the fraction (drawn / canonical thickness there) of their canonical difference, so a drawn
-    lip keeps its thickness instead of turning inside out."""
-    offsets = offsets.copy()
-    for lip, (outer, inner) in LIPS.items():
-        keep = np.clip(_lip_thickness(rest, lip) / _lip_thickness(template.MEAN_FACE, lip), 0.0, 1.0)[:, None]  # (5, 1)
-        across = np.einsum("ok,tkc->toc", _across(rest, lip), offsets[:, inner])  # (T, 5, 3)
-        offsets[:, outer] = across + keep * (offsets[:, outer] - across)
-    return offsets
+@dataclass(frozen=True)
+class MouthFit:
+    """How motion made for the canonical face's mouth is fitted to a mouth as drawn; it depends on the
+    rest landmarks alone (see Rig.fitted).
+
+    Lips drawn thinner than the canonical face's (in cartoons often a single line: inner and outer lip
+    points together): each outer lip point moves with the inner lip straight across from it (the inner
+    lip's offsets interpolated along it), but for the fraction (drawn / canonical thickness there) of
+    their canonical difference, so a drawn lip keeps its thickness instead of turning inside out.
+
+    Lips drawn further apart than the canonical face's (an open smile, a shout: most cartoons):
+    motions that close the lips are stretched by the ratio of the two gaps, so that lips shutting on
+    the canonical face shut on this one too; motions that open them are kept as they are. The further
+    closing moves both lips toward each other, fully between the outermost inner-lip pairs and
+    tapering to nothing at the mouth corners (which stay where the motion puts them).
+    """
+
+    down: np.ndarray  # (2,) the face's down axis, image pixels
+    keep: tuple[np.ndarray, ...]  # per lip of LIPS, (5, 1): the share of each outer point's own canonical motion kept
+    across: tuple[np.ndarray, ...]  # per lip of LIPS, (5, 5): the inner lip's values interpolated at each outer point
+    stretch: float  # closing motions are stretched by 1 + stretch (drawn / canonical gap − 1; 0: drawn no wider)
+    taper: np.ndarray  # (68,) each landmark's share of the further closing
+
+    @classmethod
+    def of(cls, rest: np.ndarray) -> "MouthFit":
+        """The fit for (68, ≥2) rest landmarks, image pixels."""
+        x_axis, down = lm.face_axes(rest)
+        keep = tuple(np.clip(_lip_thickness(rest, lip) / _lip_thickness(template.MEAN_FACE, lip), 0.0, 1.0)[:, None]
+                     for lip in LIPS)
+        drawn, canonical = float(_lip_gap(rest, down)), canonical_lip_gap() * lm.face_scale(rest)
+        x = rest[:, :2] @ x_axis
+        corners = np.sort(x[list(lm.MOUTH_CORNERS)])
+        sides = np.sort(x[[pair[0] for pair in lm.INNER_LIP_PAIRS]])[[0, -1]]
+        taper = np.interp(x, [corners[0], sides[0], sides[1], corners[1]], [0.0, 1.0, 1.0, 0.0])
+        return cls(down, keep, tuple(_across(rest, lip) for lip in LIPS), max(drawn / canonical - 1.0, 0.0), taper)
+
+    def keep_thickness(self, offsets: np.ndarray) -> np.ndarray:
+        """(T, 68, 3) pixel offsets with the outer lips following the inner ones as the drawn lips' thickness asks."""
+        offsets = offsets.copy()
+        for (outer, inner), keep, across in zip(LIPS.values(), self.keep, self.across):
+            straight_across = np.einsum("ok,tkc->toc", across, offsets[:, inner])  # (T, 5, 3)
+            offsets[:, outer] = straight_across + keep * (offsets[:, outer] - straight_across)
+        return offsets
+
+    def shut(self, offsets: np.ndarray) -> np.ndarray:
+        """(T, 68, 3) pixel offsets with their lip closing stretched to the gap drawn."""
+        if self.stretch == 0.0:
+            return offsets
+        extra = np.minimum(_lip_gap(offsets, self.down), 0.0) * self.stretch  # (T,) pixels of further closing, ≤ 0
+        shift = (extra[:, None] * self.taper[None, :] / 2)[..., None] * np.append(self.down, 0.0)  # (T, 68, 3)
+        offsets = offsets.copy()
+        offsets[:, UPPER_LIP] -= shift[:, UPPER_LIP]
+        offsets[:, LOWER_LIP] += shift[:, LOWER_LIP]
+        return offsets
 
 
 def _close_overlapping_lips(rest: np.ndarray, offsets: np.ndarray) -> np.ndarray:
