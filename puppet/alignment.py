@@ -20,11 +20,24 @@ free phone loop (any phone may follow any, as in the "allphone" search) decodes 
 and wherever the transcript's acoustic score, averaged over FIT_WINDOW_SECONDS, falls more than
 POOR_FIT below the loop's, the words there are unlikely to be the ones spoken.
 
+A script that skips a line, or a speaker who ad-libs one, throws a whole-text alignment off from
+there on. So when the whole text fits poorly (or not at all), it is anchored instead, as long-audio
+aligners do (Moreno et al. 1998; Gentle): the audio is recognised with a language model made of the
+script's own word pairs (`script_language_model`), the words heard are matched to the script in
+order (`common_runs`), and every run of ANCHOR_WORDS or more agreeing words pins its stretch of the
+script to its stretch of audio. Those stretches, and the script between them, are then aligned as
+timed cues, like subtitles; script words that fall where no audio is left were not said, and
+speech heard where the script has no words is reported as a poor fit. A recogniser that knows only
+the script's words finds some of them in any speech, so a script is anchored only if at least
+ANCHORED_SHARE of its words are pinned; otherwise the whole alignment stands.
+
 The acoustic model and dictionary ship in the pocketsphinx wheel (US English, CMU ARPAbet without
 stress marks, 39 phones + SIL).
 """
 import functools
+import math
 import re
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -59,6 +72,18 @@ PHONE_LOOP = Path(get_model_path("en-us")) / "en-us-phone.lm.bin"  # the free ph
 FIT_WINDOW_SECONDS = 1.0
 POOR_FIT = -5500.0
 CUE_MARGIN = 0.5  # seconds: a subtitle's words are looked for this far beyond its times, short of the neighbouring cues'
+# Anchoring a script that fits poorly (see the module docstring). The recogniser's language model
+# gives a script word's successors in the script SCRIPT_FOLLOWS of the probability; the rest goes to
+# any script word. Its beams are narrower than alignment's: recognition searches far more paths.
+ANCHOR_WORDS = 3  # a run of this many words heard as in the script pins it to the audio
+ANCHORED_SHARE = 0.5  # a script is anchored only if at least this share of its words is pinned
+SCRIPT_FOLLOWS = 0.9
+RECOGNITION_BEAMS = {"beam": 1e-60, "pbeam": 1e-60, "wbeam": 1e-40}
+# Script words between anchors are looked for in the audio between them only if it is long enough
+# for them (WORD_SECONDS a word) and not far wordier: more than UNSCRIPTED_RATIO times as many
+# words (and 2) heard there is speech the script lacks, where its few words cannot be placed.
+WORD_SECONDS = 0.1
+UNSCRIPTED_RATIO = 2
 
 # Letter groups → phones, tried longest first, for words the dictionary lacks.
 GRAPHEMES = {
@@ -159,6 +184,7 @@ class Aligner:
     def __init__(self):
         self.decoders: list[Decoder] = []  # made on first need, one per entry of SEARCHES
         self.phone_loops: list[Decoder] = []  # the same, searching a free phone loop
+        self.recogniser: Decoder | None = None  # recognises a script's words, to anchor it (made on first need)
 
     def _decoder(self, attempt: int, phone_loop: bool = False) -> Decoder:
         decoders = self.phone_loops if phone_loop else self.decoders
@@ -177,8 +203,23 @@ class Aligner:
         return self._phones(aligned, attempt, len(samples) / SAMPLE_RATE)
 
     def align_checked(self, samples: np.ndarray, text: str) -> Alignment:
-        """The phones `align` gives and the stretches of audio where the words fit poorly: spoken
-        differently or not at all, or words spoken that the text lacks."""
+        """The phones of `text` in `samples` and the stretches of audio where the words fit poorly:
+        spoken differently or not at all, or words spoken that the text lacks. Aligned whole, or, if
+        that fits poorly or fails, anchored on the runs of words recognised as in the script (module
+        docstring); PuppetError if neither places any words."""
+        try:
+            whole = self._checked(samples, text)
+            if not whole.misfits:
+                return whole
+        except PuppetError:
+            whole = None
+        anchored = self._anchored(samples, text)
+        if anchored is not None:
+            return anchored
+        return whole or self._checked(samples, text)  # the last raises the whole alignment's error
+
+    def _checked(self, samples: np.ndarray, text: str) -> Alignment:
+        """The whole text's alignment and where it fits poorly (see align_checked)."""
         aligned, attempt = self._forced(samples, text)
         duration = len(samples) / SAMPLE_RATE
         loop = self._decoder(attempt, phone_loop=True)
@@ -205,7 +246,7 @@ class Aligner:
             said_until = end
             window = samples[round(start * SAMPLE_RATE):round(end * SAMPLE_RATE)]
             try:
-                aligned = self.align_checked(window, cue.text)
+                aligned = self._checked(window, cue.text)
             except PuppetError:
                 misfits.append((start, end))
                 continue
@@ -214,6 +255,48 @@ class Aligner:
         if duration - said_until > MIN_PHONE_SECONDS:
             unsaid.append((said_until, duration))
         return Alignment(_tile(spoken, duration), misfits, unsaid)
+
+    def _anchored(self, samples: np.ndarray, text: str) -> Alignment | None:
+        """The script aligned between its anchors (module docstring), or None where too few of its
+        words are heard as in the script to pin it (under ANCHORED_SHARE in runs of ANCHOR_WORDS)."""
+        words = normalise(text)
+        heard = self._recognise(samples, words)
+        runs = [run for run in common_runs(words, [word for word, _, _ in heard]) if run[2] >= ANCHOR_WORDS]
+        if sum(size for _, _, size in runs) < ANCHORED_SHARE * len(words):
+            return None  # not this script, mostly: a recogniser that knows only its words finds some anyway
+        duration = len(samples) / SAMPLE_RATE
+        cues, unscripted, said, heard_until, until = [], [], 0, 0, 0.0
+        for in_script, in_heard, size in [*runs, (len(words), len(heard), 0)]:
+            start = heard[in_heard][1] if size else duration
+            between = words[said:in_script]  # script words between the anchors
+            if between and start - until >= WORD_SECONDS * len(between) and in_heard - heard_until <= UNSCRIPTED_RATIO * len(between) + 2:
+                cues.append(Cue(until, start, " ".join(between)))
+            elif in_heard > heard_until:  # speech where the script has nothing (left)
+                unscripted.append((heard[heard_until][1], heard[in_heard - 1][2]))
+            if size:
+                cues.append(Cue(start, heard[in_heard + size - 1][2], " ".join(words[in_script:in_script + size])))
+                said, heard_until, until = in_script + size, in_heard + size, cues[-1].end
+        aligned = self.align_cues(samples, tuple(cues))
+        return Alignment(aligned.phones, sorted(aligned.misfits + unscripted), aligned.unsaid)
+
+    def _recognise(self, samples: np.ndarray, words: list[str]) -> list[tuple[str, float, float]]:
+        """(word, start, end seconds) of each word recognised in the samples by a decoder that knows only the script's words."""
+        if self.recogniser is None:
+            self.recogniser = Decoder(samprate=SAMPLE_RATE, loglevel="FATAL", **RECOGNITION_BEAMS)
+        decoder, vocabulary = self.recogniser, set(words)
+        for word in vocabulary:
+            if decoder.lookup_word(word) is None:
+                decoder.add_word(word, guess_pronunciation(word), True)
+        with tempfile.NamedTemporaryFile("w", suffix=".arpa") as model:
+            model.write(script_language_model(words))
+            model.flush()
+            decoder.add_lm_file("script", model.name)
+        decoder.activate_search("script")
+        _decode(decoder, _padded_pcm(samples))
+        hop = SAMPLE_RATE // int(decoder.config["frate"])
+        return [(segment.word.split("(")[0], (segment.start_frame * hop - PAD_SAMPLES) / SAMPLE_RATE,
+                 ((segment.end_frame + 1) * hop - PAD_SAMPLES) / SAMPLE_RATE)
+                for segment in decoder.seg() if segment.word.split("(")[0] in vocabulary]
 
     def _forced(self, samples: np.ndarray, text: str) -> tuple[list[tuple[str, int, int, float]], int]:
         """(_align's phones, the index of the SEARCHES entry that aligned them); PuppetError if none does."""
@@ -237,6 +320,52 @@ class Aligner:
         """_align's phones as Phones tiling [0, duration] seconds."""
         return _tile([(_phone_name(name), self._seconds(attempt, start), self._seconds(attempt, end))
                       for name, start, end, _ in aligned], duration)
+
+
+def common_runs(script: list[str], heard: list[str]) -> list[tuple[int, int, int]]:
+    """(index in script, index in heard, length) of the runs of consecutive words that a longest
+    common subsequence of the two word lists pairs up, in order, each pair as early in both as a
+    longest one allows. Unlike a greedy longest-block match, it is not misled by repeated lines."""
+    same = np.array(script, dtype=object)[:, None] == np.array(heard, dtype=object)[None, :]
+    longest = np.zeros((len(script) + 1, len(heard) + 1), np.int32)  # over script[i:], heard[j:]
+    for i in range(len(script) - 1, -1, -1):
+        step = np.maximum(longest[i + 1, :-1], longest[i + 1, 1:] + same[i])
+        longest[i, :-1] = np.maximum.accumulate(step[::-1])[::-1]
+    runs: list[list[int]] = []
+    i = j = 0
+    while i < len(script) and j < len(heard):
+        if same[i, j] and longest[i, j] == longest[i + 1, j + 1] + 1:
+            if runs and runs[-1][0] + runs[-1][2] == i and runs[-1][1] + runs[-1][2] == j:
+                runs[-1][2] += 1
+            else:
+                runs.append([i, j, 1])
+            i, j = i + 1, j + 1
+        elif longest[i, j + 1] >= longest[i + 1, j]:
+            j += 1
+        else:
+            i += 1
+    return [(a, b, size) for a, b, size in runs]
+
+
+def script_language_model(words: list[str]) -> str:
+    """An ARPA bigram language model of a script's words: each word is followed by its successors in
+    the script (SCRIPT_FOLLOWS of the probability, shared equally) or, backing off, by any word of
+    the script; the script starts with its first word and ends after its last."""
+    vocabulary = sorted(set(words)) + ["</s>"]
+    follows: dict[str, set[str]] = {}
+    for before, after in zip(["<s>", *words], [*words, "</s>"]):
+        follows.setdefault(before, set()).add(after)
+    unigram = 1.0 / len(vocabulary)
+
+    def backoff(word: str) -> float:
+        return math.log10((1.0 - SCRIPT_FOLLOWS) / max(1.0 - unigram * len(follows[word]), unigram)) if word in follows else 0.0
+
+    lines = ["\\data\\", f"ngram 1={len(vocabulary) + 1}", f"ngram 2={sum(map(len, follows.values()))}", "",
+             "\\1-grams:", f"-99 <s> {backoff('<s>'):.4f}"]
+    lines += [f"{math.log10(unigram):.4f} {word} {backoff(word):.4f}" for word in vocabulary]
+    lines += ["", "\\2-grams:"]
+    lines += [f"{math.log10(SCRIPT_FOLLOWS / len(after)):.4f} {before} {word}" for before, after in follows.items() for word in sorted(after)]
+    return "\n".join([*lines, "", "\\end\\", ""])
 
 
 def _poor_fits(aligned: list[tuple[int, int, float]], free: list[tuple[int, int, float]], frame_rate: int) -> list[tuple[int, int]]:

@@ -15,6 +15,7 @@ from puppet.alignment import (
     _poor_fits,
     align,
     align_checked,
+    common_runs,
     guess_pronunciation,
     normalise,
 )
@@ -143,3 +144,22 @@ def test_subtitle_cues_align_within_their_times_and_a_wrong_cue_upsets_only_itse
     labels = frame_labels([(p.phone, p.start, p.end) for p in phones], n)
     others = np.r_[0:int(cues[0].end / FRAME), int(cues[2].start / FRAME):n]
     assert (labels == frame_labels([(p.phone, p.start, p.end) for p in whole], n))[others].mean() > 0.9
+
+
+def test_common_runs_pair_words_in_order_early_and_past_repeats_and_gaps():
+    assert common_runs(list("abc"), list("abcabc")) == [(0, 0, 3)]  # a repeated line: the first time
+    assert common_runs(list("abcdxyz"), list("abcqqxyz")) == [(0, 0, 3), (4, 5, 3)]  # "d" unsaid, "qq" unscripted
+    assert common_runs(list("ab"), []) == common_runs([], list("ab")) == []
+
+
+def test_a_script_that_skips_a_sentence_is_anchored_and_the_rest_placed_as_in_the_full_script(demo_speech):
+    samples, whole, cues = demo_cues(demo_speech)
+    n = int(len(samples) / 16000 / FRAME)
+    skipped = align_checked(samples, f"{cues[0].text} {cues[2].text}")  # "Give me any picture ..." said, not written
+    assert_tiles(skipped.phones, len(samples) / 16000)
+    (misfit,) = skipped.misfits
+    assert cues[1].start - 0.3 <= misfit[0] and misfit[1] <= cues[1].end + 0.3  # the unwritten sentence, nearly all of it
+    assert misfit[1] - misfit[0] > 0.8 * (cues[1].end - cues[1].start)
+    labels = frame_labels([(p.phone, p.start, p.end) for p in skipped.phones], n)
+    others = np.r_[0:int(cues[0].end / FRAME), int(cues[2].start / FRAME):n]
+    assert (labels == frame_labels([(p.phone, p.start, p.end) for p in whole], n))[others].mean() > 0.95
