@@ -6,6 +6,7 @@ import subprocess
 import numpy as np
 import pytest
 from conftest import SHARED_MEDIA
+from pocketsphinx import Decoder
 
 from puppet import audio
 from puppet.alignment import (
@@ -18,6 +19,7 @@ from puppet.alignment import (
     common_runs,
     guess_pronunciation,
     normalise,
+    script_language_model,
 )
 from puppet.errors import PuppetError
 
@@ -150,6 +152,16 @@ def test_common_runs_pair_words_in_order_early_and_past_repeats_and_gaps():
     assert common_runs(list("abc"), list("abcabc")) == [(0, 0, 3)]  # a repeated line: the first time
     assert common_runs(list("abcdxyz"), list("abcqqxyz")) == [(0, 0, 3), (4, 5, 3)]  # "d" unsaid, "qq" unscripted
     assert common_runs(list("ab"), []) == common_runs([], list("ab")) == []
+
+
+def test_the_script_language_model_follows_the_script_and_loads_into_pocketsphinx(tmp_path):
+    model = script_language_model(["the", "cat", "the", "dog"])
+    bigrams = {" ".join(line.split()[1:]): float(line.split()[0]) for line in model.split("\\2-grams:")[1].splitlines()[1:-2]}
+    assert bigrams == pytest.approx({"<s> the": np.log10(0.9), "the cat": np.log10(0.45), "the dog": np.log10(0.45),
+                                     "cat the": np.log10(0.9), "dog </s>": np.log10(0.9)}, abs=1e-4)
+    (tmp_path / "script.arpa").write_text(script_language_model(["yes", "yes"]))  # every word follows every word
+    decoder = Decoder(samprate=16000, loglevel="FATAL")
+    decoder.add_lm_file("script", str(tmp_path / "script.arpa"))
 
 
 def test_a_script_that_skips_a_sentence_is_anchored_and_the_rest_placed_as_in_the_full_script(demo_speech):
