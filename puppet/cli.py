@@ -266,6 +266,8 @@ def run(args: argparse.Namespace) -> int:
         size = args.size if isinstance(args.size, tuple) else video.output_size(puppet.rig.image_size, args.size)
         options = replace(options, size=size)
     options = replace(options, life=replace(options.life, seed=args.seed))
+    if transcript is not None and not args.quiet:
+        _say_aligning()
     output = video.render(puppet, audio_path, args.output, options, args.force, args.landmarks_out, progress=not args.quiet)
     print(f"wrote {output}")
     return 0
@@ -290,6 +292,11 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
+def _say_aligning() -> None:
+    """What the wait before the first frame is, when a transcript is aligned (no bar can show its progress)."""
+    print("aligning the transcript to the audio (about 6 s a minute of speech, more where it does not fit)…", file=sys.stderr, flush=True)
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """PuppetWarnings as one line, like errors; other warnings as Python shows them."""
     if issubclass(category, PuppetWarning):
@@ -312,6 +319,8 @@ def _predict(args: argparse.Namespace) -> int:
     samples = audio.load(args.audio)
     audio.check_audible(samples, str(args.audio))
     frames = frame_count(len(samples), audio.ANALYSIS_RATE, args.fps)
+    if transcript is not None:
+        _say_aligning()
     motion = lipsync.learned_motion(samples, rest, args.fps, frames, transcript=transcript)
     motion = motion + life_motion(frames, args.fps, rest, LifeOptions(seed=args.seed))
     track.write(output, posed_landmarks(rest, motion), args.fps)
