@@ -190,7 +190,8 @@ def test_a_transcript_of_other_words_is_warned_of_in_one_line(files, capsys, dem
     other.write_text(text.replace(text.split(".")[1], " The quick brown fox jumps over the lazy dog", 1))
     out = files["dir"] / "motion.npz"
     assert main(["predict", str(demo_speech), "--transcript", str(other), "-o", str(out)]) == 0
-    (warning,) = capsys.readouterr().err.strip().splitlines()
+    aligning, warning = capsys.readouterr().err.strip().splitlines()
+    assert aligning.startswith("aligning the transcript")
     assert warning.startswith("puppet: warning: the transcript does not fit the audio at 0:0") and out.is_file()
 
 
