@@ -266,7 +266,7 @@ def run(args: argparse.Namespace) -> int:
         size = args.size if isinstance(args.size, tuple) else video.output_size(puppet.rig.image_size, args.size)
         options = replace(options, size=size)
     options = replace(options, life=replace(options.life, seed=args.seed))
-    if transcript is not None and not args.quiet:
+    if transcript is not None and motion == "learned" and not args.quiet:
         _say_aligning()
     output = video.render(puppet, audio_path, args.output, options, args.force, args.landmarks_out, progress=not args.quiet)
     print(f"wrote {output}")
