@@ -201,9 +201,9 @@ def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sour
 
 def baselines(canonical: np.ndarray) -> dict[str, Source]:
     """The sources every run scores: the learned networks as files get them, at rest in pauses (when this
-    install has them: "learned" is the offline model files are rendered with, "learned-live" the
-    streaming one), the loudness baseline and a static face; each maps 16 kHz speech to
-    (offsets (T, 68, 3), rotation (T, 3) | None)."""
+    install has them: "learned" is what files are rendered with, the offline and streaming models
+    averaged, "learned-live" the streaming model alone, as live), the loudness baseline and a static
+    face; each maps 16 kHz speech to (offsets (T, 68, 3), rotation (T, 3) | None)."""
     from puppet import lipsync, speaker
     from puppet.loudness import loudness_motion
 
@@ -222,10 +222,10 @@ def baselines(canonical: np.ndarray) -> dict[str, Source]:
                 heard.update(samples=samples, embedding=speaker.embed(samples))
             return heard["embedding"]
 
-        def learned(kind):
-            return lambda samples: lipsync.speech_offsets(samples, lipsync.shipped_predictor(kind), embedding(samples))
+        def learned(predictor):
+            return lambda samples: lipsync.speech_offsets(samples, predictor(), embedding(samples))
 
-        sources = {"learned": learned("offline"), "learned-live": learned("streaming"), **sources}
+        sources = {"learned": learned(lipsync.file_predictor), "learned-live": learned(lambda: lipsync.shipped_predictor("streaming")), **sources}
     return sources
 
 

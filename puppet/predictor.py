@@ -12,6 +12,7 @@ centre). With lookahead 3 (the default) that is 82.5 ms of audio past the start 
 past its centre, 60 ms of which is the network's own lookahead. At the end of the audio, `finish` pads silence to release the last frames.
 """
 import json
+from concurrent.futures import ThreadPoolExecutor
 from importlib.resources import files
 from pathlib import Path
 
@@ -113,7 +114,11 @@ class Predictor:
         and rotation (T, 3) float32 radians (pitch, yaw, roll); T = features.motion_frame_count(N at 16 kHz),
         frame t at t / MOTION_FPS seconds.
         """
-        steps = audio_steps(to_mono_16k(samples, sample_rate), self.lookahead)
+        return self.predict_steps(audio_steps(to_mono_16k(samples, sample_rate), 0), speaker)
+
+    def predict_steps(self, steps: np.ndarray, speaker: np.ndarray):
+        """`predict` for a clip's (T, 160) network input, as audio_steps(samples, 0) makes it."""
+        steps = np.concatenate([steps, np.full((self.lookahead, N_STEP), SILENCE, np.float32)])
         speaker, state = check_speaker(speaker), self.initial_state()
         offsets, rotation = [], []
         for start in range(0, len(steps), OFFLINE_CHUNK):
@@ -125,6 +130,23 @@ class Predictor:
     def stream(self, speaker: np.ndarray) -> "Stream":
         """A new stream for one voice: push 16 kHz audio as it arrives, get motion frames as they become known."""
         return Stream(self, speaker)
+
+
+class Ensemble:
+    """Networks trained apart for the same motion, averaged: where one errs the other often does not, so
+    the mean is nearer the truth than either (files use the offline and streaming models together).
+    Each runs in its own thread (onnxruntime releases the GIL), so on two cores it costs about one; the
+    threads are kept, since onnxruntime's first run on a new thread is slow."""
+
+    def __init__(self, predictors: tuple[Predictor, ...]):
+        self.predictors = predictors
+        self.pool = ThreadPoolExecutor(len(predictors), thread_name_prefix="ensemble")
+
+    def predict(self, samples: np.ndarray, speaker: np.ndarray, sample_rate: int = features.SAMPLE_RATE):
+        """The mean of the networks' Predictor.predict (same arguments, same shapes); the features are made once."""
+        steps = audio_steps(to_mono_16k(samples, sample_rate), 0)
+        answers = list(self.pool.map(lambda predictor: predictor.predict_steps(steps, speaker), self.predictors))
+        return tuple(np.mean([answer[i] for answer in answers], axis=0, dtype=np.float32) for i in range(2))
 
 
 def check_speaker(speaker: np.ndarray) -> np.ndarray:

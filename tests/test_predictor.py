@@ -135,3 +135,15 @@ def test_shipped_model_closes_the_mouth_in_silence(speaker, kind):
     upper, lower = [p[0] for p in INNER_LIP_PAIRS], [p[1] for p in INNER_LIP_PAIRS]
     opening = offsets[:, lower, 1] - offsets[:, upper, 1]  # IOD units, y down: > 0 opens the mouth
     assert np.abs(opening).max() < 0.03
+
+
+def test_an_ensemble_is_the_mean_of_its_networks_with_their_own_lookaheads(model, offline_model, speech, speaker):
+    """Two networks hearing 60 and 300 ms ahead: the ensemble gives each clip frame the mean of their frames."""
+    from puppet.predictor import Ensemble
+
+    answers = [predictor.predict(speech, speaker) for predictor in (model, offline_model)]
+    offsets, rotation = Ensemble((model, offline_model)).predict(speech, speaker)
+    assert offsets.shape == answers[0][0].shape and offsets.dtype == np.float32
+    np.testing.assert_allclose(offsets, (answers[0][0] + answers[1][0]) / 2, atol=1e-6)
+    np.testing.assert_allclose(rotation, (answers[0][1] + answers[1][1]) / 2, atol=1e-6)
+    assert not np.allclose(answers[0][0], answers[1][0], atol=1e-3)  # they differ, so the mean is a test
