@@ -11,8 +11,8 @@ Pauses. The network rests the mouth in digital silence, but a real recording's p
 hiss and breath, over which it leaves the lips a little apart. A file is known whole, so its pauses are
 found from its own levels (the live window has its noise gate instead, puppet.live.VoiceGate): a run of
 at least PAUSE_SECONDS whose 20 ms frames all lie PAUSE_BELOW_DB under the recording's loud speech
-(its SPEECH_PERCENTILE frame) is a pause, and the mouth and brows ease to rest inside it over
-PAUSE_EASE_SECONDS from each end, head motion untouched.
+(its SPEECH_PERCENTILE frame), or, in a noisy recording, close to its noise floor, is a pause, and
+the mouth and brows ease to rest inside it over PAUSE_EASE_SECONDS from each end, head motion untouched.
 
 Transcripts. When the words spoken are known (a script, subtitles), the aligner (puppet.alignment)
 places their phones in the audio and the articulation model (puppet.visemes) that made the network's
@@ -57,6 +57,12 @@ def has_model() -> bool:
 PAUSE_SECONDS = 0.3  # quiet runs shorter than this (stop closures, breaths between words) are speech
 PAUSE_BELOW_DB = 20.0  # a frame this far under the loud speech level is quiet
 SPEECH_PERCENTILE = 98  # the recording's loud speech level: this percentile of its frame levels
+# In a noisy recording (a fan, traffic: the noise floor less than PAUSE_BELOW_DB under the speech) a
+# frame within PAUSE_ABOVE_FLOOR_DB of the floor (its FLOOR_PERCENTILE frame) is quiet too, if that is
+# still at least PAUSE_MIN_BELOW_DB under the loud speech.
+FLOOR_PERCENTILE = 5
+PAUSE_ABOVE_FLOOR_DB = 6.0
+PAUSE_MIN_BELOW_DB = 8.0
 PAUSE_EASE_SECONDS = 0.1  # inside a pause, the offsets fade to rest over this from each end
 
 
@@ -68,7 +74,9 @@ def pause_weights(samples: np.ndarray) -> np.ndarray:
     padded = np.zeros(frames * step, np.float32)
     padded[: len(samples)] = samples[: len(padded)]
     level = 10 * np.log10(np.mean(padded.reshape(frames, step) ** 2, axis=1) + 1e-12)  # dBFS per frame
-    quiet = np.r_[False, level < np.percentile(level, SPEECH_PERCENTILE) - PAUSE_BELOW_DB, False]
+    loud, floor = np.percentile(level, SPEECH_PERCENTILE), np.percentile(level, FLOOR_PERCENTILE)
+    threshold = max(loud - PAUSE_BELOW_DB, min(floor + PAUSE_ABOVE_FLOOR_DB, loud - PAUSE_MIN_BELOW_DB))
+    quiet = np.r_[False, level < threshold, False]
     edges = np.flatnonzero(quiet[1:] != quiet[:-1]).reshape(-1, 2)  # [start, end) of each quiet run
     weights = np.ones(frames, np.float32)
     ease = PAUSE_EASE_SECONDS * MOTION_FPS

@@ -66,6 +66,21 @@ def test_pauses_are_found_from_the_recordings_own_levels():
     assert np.all(lipsync.pause_weights(np.zeros(16000, np.float32)) == 1)  # nothing louder: no pause to find
 
 
+def test_in_a_noisy_recording_pauses_are_found_near_its_noise_floor():
+    """A fan 12 dB under the speech throughout (under 20 dB: the quiet rule alone finds no pause): the
+    0.6 s of fan alone is a pause, the 0.2 s gap is not, and a steady noise with nothing louder has none."""
+    rng = np.random.default_rng(0)
+    t = np.arange(16000) / 16000
+    speech = (0.3 * np.sin(2 * np.pi * 180 * t)).astype(np.float32)
+    silent = np.zeros(9600, np.float32)
+    clean = np.concatenate([speech, silent, speech, silent[:3200], speech])  # pause: frames 50–79; gap: 130–139
+    fan = rng.normal(0, 0.3 / np.sqrt(2) * 10 ** (-12 / 20), len(clean)).astype(np.float32)
+    weights = lipsync.pause_weights(clean + fan)
+    assert np.all(weights[:50] == 1) and np.all(weights[80:] == 1)
+    assert np.all(weights[55:75] == 0)
+    assert np.all(lipsync.pause_weights(fan) == 1)
+
+
 def test_the_mouth_rests_in_a_noisy_pause(demo, demo_speech):
     """A pause full of hiss (not digital silence) between two sentences: the lips come to rest."""
     speech = audio.load(demo_speech)
