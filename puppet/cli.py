@@ -162,12 +162,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="rebuild the lip-sync network: make the TTS corpus, label it, train, export ONNX (needs the train extra)",
         description="Rebuild the shipped lip-sync models from scratch: synthesise and augment a speech corpus with local "
         "TTS voices, align it with pocketsphinx and compute articulation targets, train the network twice (the live "
-        "model hears 60 ms ahead, the model for files 300 ms), export ONNX. Every stage resumes where it stopped.",
+        "model hears 60 ms ahead, the offline one 300 ms; files use the two averaged), export ONNX. Every stage "
+        "resumes where it stopped.",
     )
     train.add_argument("--corpus", type=Path, default=Path.home() / ".cache" / "puppet" / "corpus", help="corpus folder (default ~/.cache/puppet/corpus)")
     train.add_argument("--hours", type=float, default=6.0, help="hours of speech in the corpus (default 6)")
     train.add_argument("--out", type=Path, default=Path("runs") / "landmarks", help="checkpoints, logs and ONNX models, in OUT/streaming and OUT/offline (default runs/landmarks)")
-    train.add_argument("--model", choices=["both", "streaming", "offline"], default="both", help="which model to train: the live one (hears 60 ms ahead), the one for files (300 ms), or both (default)")
+    train.add_argument("--model", choices=["both", "streaming", "offline"], default="both", help="which model to train: the live one (hears 60 ms ahead), the offline one (300 ms), or both (default; files use both)")
     train.add_argument("--steps", type=int, help="training steps (default: the training config's)")
     train.add_argument("--seed", type=int, default=0, help="corpus seed (default 0)")
     train.add_argument("--install", action="store_true", help="copy the exported models into this install's assets/models")
