@@ -326,7 +326,8 @@ def common_runs(script: list[str], heard: list[str]) -> list[tuple[int, int, int
     """(index in script, index in heard, length) of the runs of consecutive words that a longest
     common subsequence of the two word lists pairs up, in order, each pair as early in both as a
     longest one allows. Unlike a greedy longest-block match, it is not misled by repeated lines."""
-    same = np.array(script, dtype=object)[:, None] == np.array(heard, dtype=object)[None, :]
+    ids = {word: i for i, word in enumerate(set(script) | set(heard))}
+    same = np.array([ids[w] for w in script], np.int64)[:, None] == np.array([ids[w] for w in heard], np.int64)[None, :]
     longest = np.zeros((len(script) + 1, len(heard) + 1), np.int32)  # over script[i:], heard[j:]
     for i in range(len(script) - 1, -1, -1):
         step = np.maximum(longest[i + 1, :-1], longest[i + 1, 1:] + same[i])
