@@ -260,9 +260,11 @@ class Aligner:
         """The script aligned between its anchors (module docstring), or None where too few of its
         words are heard as in the script to pin it (under ANCHORED_SHARE in runs of ANCHOR_WORDS)."""
         words = normalise(text)
+        if not words:
+            return None
         heard = self._recognise(samples, words)
         runs = [run for run in common_runs(words, [word for word, _, _ in heard]) if run[2] >= ANCHOR_WORDS]
-        if sum(size for _, _, size in runs) < ANCHORED_SHARE * len(words):
+        if not runs or sum(size for _, _, size in runs) < ANCHORED_SHARE * len(words):
             return None  # not this script, mostly: a recogniser that knows only its words finds some anyway
         duration = len(samples) / SAMPLE_RATE
         cues, unscripted, said, heard_until, until = [], [], 0, 0, 0.0
@@ -309,7 +311,7 @@ class Aligner:
                 return _align(self._decoder(attempt), words, raw), attempt
             except RuntimeError as error:
                 reason = error
-        raise PuppetError(f"cannot align {len(samples) / SAMPLE_RATE:.2f} s of audio to {text[:60]!r}: {reason}")
+        raise PuppetError(f"cannot align {len(samples) / SAMPLE_RATE:.2f} s of audio to {' '.join(text.split())[:60]!r}: {reason}")
 
     def _seconds(self, attempt: int, frame: int) -> float:
         """Seconds into the unpadded audio of a frame of SEARCHES[attempt]'s decode of the padded audio."""

@@ -90,8 +90,9 @@ def test_transcripts_are_normalised_to_dictionary_words():
 
 
 def test_impossible_alignments_raise_a_clear_error():
-    with pytest.raises(PuppetError, match="nothing to align"):
-        align(np.zeros(16000, np.float32), "?!")
+    for aligner in align, align_checked:
+        with pytest.raises(PuppetError, match="nothing to align"):
+            aligner(np.zeros(16000, np.float32), "?!")
     with pytest.raises(PuppetError, match="cannot align"):
         align(np.zeros(800, np.float32), "the quick brown fox jumps over the lazy dog again and again")
 
