@@ -135,18 +135,19 @@ class Predictor:
 class Ensemble:
     """Networks trained apart for the same motion, averaged: where one errs the other often does not, so
     the mean is nearer the truth than either (files use the offline and streaming models together).
-    Each runs in its own thread (onnxruntime releases the GIL), so on two cores it costs about one; the
-    threads are kept, since onnxruntime's first run on a new thread is slow."""
+    Each runs in a thread of its own (onnxruntime releases the GIL), so on two cores it costs about one."""
 
     def __init__(self, predictors: tuple[Predictor, ...]):
         self.predictors = predictors
-        self.pool = ThreadPoolExecutor(len(predictors), thread_name_prefix="ensemble")
 
     def predict(self, samples: np.ndarray, speaker: np.ndarray, sample_rate: int = features.SAMPLE_RATE):
         """The mean of the networks' Predictor.predict (same arguments, same shapes); the features are made once."""
         steps = audio_steps(to_mono_16k(samples, sample_rate), 0)
-        answers = list(self.pool.map(lambda predictor: predictor.predict_steps(steps, speaker), self.predictors))
-        return tuple(np.mean([answer[i] for answer in answers], axis=0, dtype=np.float32) for i in range(2))
+        with ThreadPoolExecutor(len(self.predictors)) as pool:
+            answers = list(pool.map(lambda predictor: predictor.predict_steps(steps, speaker), self.predictors))
+        offsets = np.mean([offsets for offsets, _ in answers], axis=0, dtype=np.float32)
+        rotation = np.mean([rotation for _, rotation in answers], axis=0, dtype=np.float32)
+        return offsets, rotation
 
 
 def check_speaker(speaker: np.ndarray) -> np.ndarray:
