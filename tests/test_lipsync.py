@@ -31,6 +31,16 @@ def test_mouth_moves_with_speech_and_rests_in_silence(demo, demo_speech):
     assert np.abs(quiet).max() < 0.03  # at rest in silence
 
 
+def test_files_are_animated_with_both_networks_averaged(demo, demo_speech):
+    samples = audio.load(demo_speech)
+    both = lipsync.file_predictor()
+    assert [p.lookahead for p in both.predictors] == [lipsync.shipped_predictor(kind).lookahead for kind in ("offline", "streaming")]
+    rest, frames = demo.rig.landmarks, int(len(samples) / 16000 * FPS)
+    default = lipsync.learned_motion(samples, rest, FPS, frames).offsets
+    assert np.array_equal(default, lipsync.learned_motion(samples, rest, FPS, frames, both).offsets)
+    assert not np.allclose(default, lipsync.learned_motion(samples, rest, FPS, frames, lipsync.shipped_predictor("offline")).offsets)
+
+
 @pytest.mark.parametrize("kind", ["noise", "clipped", "8k", "44k", "stereo"])
 def test_any_input_gives_bounded_motion(demo, demo_speech, kind):
     speech = audio.load(demo_speech)
