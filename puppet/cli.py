@@ -131,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     live.add_argument("--msaa", type=int, default=0, choices=(0, 2, 4, 8), help="anti-aliasing samples per pixel (default 0: the mouth rim is smoothed in the shader anyway)")
     live.add_argument("--expression", choices=list(EXPRESSION_NAMES), help="starting expression (keys 1-5 change it)")
     live.add_argument("--sensitivity", type=float, metavar="DB", help="voice gain in dB (keys + and -); saved with the puppet")
-    live.add_argument("--gate", type=float, metavar="DBFS", help="noise gate in dBFS: quieter sound counts as silence (keys [ and ]); saved with the puppet")
+    live.add_argument("--gate", type=float, metavar="DBFS", help="noise gate in dBFS: quieter sound counts as silence (keys [ and ]; it also rises to 6 dB above the room's noise by itself); saved with the puppet")
     live.add_argument("--blink-rate", type=float, metavar="PER_MINUTE", help="blinks per minute (keys , and .); saved with the puppet")
     live.add_argument("--blink-randomness", type=float, metavar="SPREAD", help="spread of the gaps between blinks, 0 (metronome) to 2 (default 0.5); saved with the puppet")
     live.add_argument("--push-to-talk", action="store_true", help="the mouth moves only while Space is held (key T toggles)")

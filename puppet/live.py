@@ -49,6 +49,14 @@ VOICE_SECONDS = (3.0, MAX_VOICE_SECONDS)  # seconds of heard voice after which t
 ENVELOPE_SECONDS = 0.01  # time constant of the gate's level detector
 GATE_HOLD = 0.25  # seconds the gate stays open after the voice drops below it (word endings, short pauses)
 GATE_FADE = 0.005  # time constant of the gate opening and closing (no clicks)
+# The room's noise (a fan, a hum, traffic) lifts the gate: it opens only NOISE_MARGIN_DB above the
+# noise floor, the NOISE_PERCENTILE of the levels of the last NOISE_WINDOW seconds in NOISE_BLOCK blocks
+# (between words and phrases the level falls to it), once NOISE_MIN_SECONDS have been heard.
+NOISE_BLOCK = 0.05
+NOISE_WINDOW = 8.0
+NOISE_PERCENTILE = 10
+NOISE_MARGIN_DB = 6.0
+NOISE_MIN_SECONDS = 1.0
 JAW_ACTIVITY = 0.25  # inter-ocular distances of lower-lip drop that count as fully active (livelier sway)
 SENSITIVITY_STEP = 3.0  # dB per key press
 GATE_STEP = 5.0
@@ -61,7 +69,7 @@ KEYS = (
     ("M", "mute / unmute the microphone"),
     ("T", "push-to-talk on / off (then hold Space to talk)"),
     ("+ / -", f"sensitivity up / down ({SENSITIVITY_STEP:g} dB)"),
-    ("] / [", f"noise gate up / down ({GATE_STEP:g} dB)"),
+    ("] / [", f"noise gate up / down ({GATE_STEP:g} dB; it also rises above the room's noise)"),
     (". / ,", "more / fewer blinks"),
     ("F", "fps and latency readout"),
     ("Esc, Q", "quit"),
@@ -96,8 +104,10 @@ class VoiceGate:
     """Sensitivity, noise gate, mute and push-to-talk on a 16 kHz stream, state carried across chunks.
 
     The level is a one-pole power envelope (ENVELOPE_SECONDS); the gate opens while it is above
-    `gate_db` (after the sensitivity gain) and stays open GATE_HOLD seconds after; its gain fades
+    `threshold_db` (after the sensitivity gain) and stays open GATE_HOLD seconds after; its gain fades
     over GATE_FADE so nothing clicks. A closed gate hands the predictor silence, so the mouth rests.
+    The threshold is the user's `gate_db`, raised to NOISE_MARGIN_DB above the room's noise floor
+    where that is louder: the network opens the mouth on steady noise as it does on speech.
     """
 
     def __init__(self, settings: LiveSettings):
@@ -109,6 +119,15 @@ class VoiceGate:
         self.samples_seen = 0
         self.last_open = -10**12  # sample index at which the level was last above the gate
         self.level_db = -120.0  # level of the latest chunk after the gain (for the readout)
+        self.block = int(NOISE_BLOCK * features.SAMPLE_RATE)
+        self.block_levels: deque[float] = deque(maxlen=round(NOISE_WINDOW / NOISE_BLOCK))  # dB
+        self.pending = np.zeros(0)  # envelope power of a block not yet complete
+        self.floor_db = -120.0  # the room's noise floor, after the gain
+
+    @property
+    def threshold_db(self) -> float:
+        """The level (dBFS, after the gain) above which the gate opens."""
+        return max(self.settings.gate_db, self.floor_db + NOISE_MARGIN_DB)
 
     def __call__(self, samples: np.ndarray, allowed: bool) -> np.ndarray:
         """(n,) float32 16 kHz → (n,) float32: gained, gated; all silence when not `allowed` (muted)."""
@@ -118,13 +137,25 @@ class VoiceGate:
         power, self.power_state = lfilter([self.envelope], [1.0, self.envelope - 1.0], gained**2, zi=self.power_state)
         self.level_db = 10 * math.log10(max(float(power[-1]), 1e-12))
         index = self.samples_seen + np.arange(len(samples))
-        above = np.where(power > 10 ** (self.settings.gate_db / 10), index, -(10**12))
+        above = np.where(power > 10 ** (self.threshold_db / 10), index, -(10**12))
+        self._track_floor(power)
         last_open = np.maximum.accumulate(np.maximum(above, self.last_open))
         self.last_open = int(last_open[-1])
         self.samples_seen += len(samples)
         target = ((index - last_open) <= GATE_HOLD * features.SAMPLE_RATE) & allowed
         gain, self.gain_state = lfilter([self.fade], [1.0, self.fade - 1.0], target.astype(np.float64), zi=self.gain_state)
         return np.clip(gained * gain, -1.0, 1.0).astype(np.float32)
+
+    def _track_floor(self, power: np.ndarray) -> None:
+        """Add the envelope power of new samples to the noise-floor blocks and update floor_db."""
+        power = np.concatenate([self.pending, power])
+        whole = len(power) // self.block * self.block
+        self.pending = power[whole:]
+        if whole == 0:
+            return
+        self.block_levels.extend(10 * np.log10(power[:whole].reshape(-1, self.block).mean(axis=1) + 1e-12))
+        if len(self.block_levels) * NOISE_BLOCK >= NOISE_MIN_SECONDS:
+            self.floor_db = float(np.percentile(self.block_levels, NOISE_PERCENTILE))
 
 
 class LipSync:
@@ -250,7 +281,7 @@ class LivePuppet:
     def hear(self, chunk: Chunk, talking: bool) -> None:
         """New audio from the source; `talking` is False while muted or push-to-talk is released."""
         voice = self.gate(chunk.samples, talking)
-        if talking and self.gate.level_db > self.settings.gate_db:  # only speech teaches who is speaking
+        if talking and self.gate.level_db > self.gate.threshold_db:  # only speech teaches who is speaking
             self.voice.hear(voice)
         self.lips.hear(voice, chunk.end_time)
         if len(voice):  # until when (capture time) the gate lets the voice through
@@ -398,12 +429,13 @@ class Controls:
     def tell(self, text: str) -> None:
         self.notice = (text, time.perf_counter())
 
-    def lines(self, status: str | None, stats: Stats, level_db: float) -> list[str]:
+    def lines(self, status: str | None, stats: Stats, gate: VoiceGate) -> list[str]:
         """The overlay's text this frame."""
         lines = [f"{key:8s} {action}" for key, action in KEYS] if self.show_help else []
         if self.settings.show_stats:
             lines.append(stats.readout())
-            lines.append(f"voice {level_db:5.0f} dB   gate {self.settings.gate_db:.0f} dB   sensitivity {self.settings.sensitivity_db:+.0f} dB")
+            noise = f" (room noise {gate.floor_db:.0f} dB)" if gate.threshold_db > self.settings.gate_db else ""
+            lines.append(f"voice {gate.level_db:5.0f} dB   gate {gate.threshold_db:.0f} dB{noise}   sensitivity {self.settings.sensitivity_db:+.0f} dB")
         if status:
             lines.append(status)
         if self.muted:
@@ -480,7 +512,7 @@ def run(puppet: Puppet, source: AudioSource, display, options: LiveOptions, sett
             if min(size) > 0:  # minimized: nothing to draw
                 display.begin(window_background)
                 renderer.draw(positions, size)
-                overlay.draw(controls.lines(source.status, stats, live.gate.level_db), size)
+                overlay.draw(controls.lines(source.status, stats, live.gate), size)
             presented = display.present()
             if min(size) > 0 and not math.isnan(moment):
                 stats.add(presented, presented - moment, presented - now)

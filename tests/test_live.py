@@ -93,6 +93,42 @@ def test_the_mouth_moves_with_speech_and_rests_in_silence(speech, demo):
     puppet.close()
 
 
+def fan(seconds, level_db, seed=0):
+    """Brown noise (a fan, a room) at level_db dBFS."""
+    from scipy.signal import lfilter
+
+    noise = lfilter([1.0], [1.0, -0.95], np.random.default_rng(seed).normal(size=int(seconds * RATE)))
+    return (noise / np.sqrt(np.mean(noise**2)) * 10 ** (level_db / 20)).astype(np.float32)
+
+
+def test_the_gate_rises_above_the_rooms_noise_and_still_passes_the_voice():
+    gate = VoiceGate(LiveSettings(gate_db=-50.0))
+    assert gate.threshold_db == -50.0  # nothing heard yet: the user's gate
+    noise = np.concatenate([gate(piece, True) for piece in np.split(fan(3.0, -40.0), 60)])  # 50 ms pieces
+    assert gate.threshold_db == pytest.approx(gate.floor_db + live.NOISE_MARGIN_DB) and -45 < gate.floor_db < -40
+    assert np.abs(noise[-RATE:]).max() < 1e-5  # the fan alone no longer opens the gate
+    voice = gate(tone(0.5, 0.1) + fan(0.5, -40.0, seed=1), True)  # a voice 23 dB over the fan
+    assert np.abs(voice[-800:]).max() > 0.09
+    quiet = VoiceGate(LiveSettings(gate_db=-50.0))
+    quiet(fan(3.0, -80.0), True)
+    assert quiet.threshold_db == -50.0  # a quiet room keeps the user's gate
+
+
+def test_the_mouth_rests_while_a_fan_runs_and_moves_when_spoken_over(speech, demo):
+    puppet = LivePuppet(demo, LiveSettings(blink_rate=0.0), shipped_predictor("streaming"))
+    rest = demo.rig.landmarks
+    clip = fan(6.0, -40.0)
+    clip[3 * RATE :] += speech[: 3 * RATE] * (10 ** (-15 / 20) / np.sqrt(np.mean(speech[: 3 * RATE] ** 2)))  # speech at -15 dBFS
+    gaps = []
+    for chunk, now in blocks(clip, start=puppet.start):
+        puppet.hear(chunk, True)
+        gaps.append(lip_gap(puppet.pose(now)[0], rest))
+    gaps, per_second = np.asarray(gaps) - lip_gap(rest, rest), RATE // BLOCK
+    assert np.abs(gaps[int(1.5 * per_second) : 3 * per_second]).mean() < 0.02  # the fan alone, once the floor is known (was 0.06)
+    assert gaps[int(3.5 * per_second) :].max() > 0.15  # talking over it
+    puppet.close()
+
+
 def test_muted_voice_leaves_the_mouth_at_rest(speech, demo):
     puppet = LivePuppet(demo, LiveSettings(blink_rate=0.0), shipped_predictor("streaming"))
     rest = demo.rig.landmarks
@@ -132,7 +168,7 @@ def test_controls_mute_push_to_talk_and_steps():
     controls.handle(Event("key", "]"))
     assert controls.settings.sensitivity_db == live.SENSITIVITY_STEP and controls.settings.gate_db == -50 + live.GATE_STEP
     controls.handle(Event("key", "h"))
-    assert any("push-to-talk" in line for line in controls.lines(None, Stats(60.0), -30.0))
+    assert any("push-to-talk" in line for line in controls.lines(None, Stats(60.0), VoiceGate(controls.settings)))
     controls.handle(Event("key", "escape"))
     assert controls.quit
 
