@@ -1,6 +1,6 @@
 """Audio features for the landmark predictor: one log-mel implementation (numpy, with scipy's FFT)
 shared by training and run time, so the network hears at run time exactly what it learned from
-(scipy's FFT keeps float32 and differs from numpy's by under 1e-5 in the log-mels).
+(scipy's FFT runs 6× faster than numpy's here; the log-mels differ by under 1e-5).
 
 The spec (also written into every exported model's metadata, see `SPEC`):
 - input: mono float32 in [-1, 1] at SAMPLE_RATE (16 kHz); other rates are resampled by the decoder
@@ -88,7 +88,7 @@ def log_mel(samples: np.ndarray) -> np.ndarray:
     window = np.zeros(N_FFT, np.float32)
     offset = (N_FFT - WINDOW) // 2
     window[offset : offset + WINDOW] = np.hanning(WINDOW + 2)[1:-1]
-    spectrum = np.abs(scipy.fft.rfft(frames * window, axis=1)) ** 2  # scipy's keeps float32: 6× numpy's speed
+    spectrum = np.abs(scipy.fft.rfft(frames * window, axis=1)) ** 2  # scipy's: 6× numpy's speed
     mel = spectrum.astype(np.float32) @ mel_filters().T
     return np.log10(np.maximum(mel, LOG_FLOOR)).astype(np.float32)
 
