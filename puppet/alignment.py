@@ -295,9 +295,7 @@ class Aligner:
             decoder.add_lm_file("script", model.name)
         decoder.activate_search("script")
         _decode(decoder, _padded_pcm(samples))
-        hop = SAMPLE_RATE // int(decoder.config["frate"])
-        return [(segment.word.split("(")[0], (segment.start_frame * hop - PAD_SAMPLES) / SAMPLE_RATE,
-                 ((segment.end_frame + 1) * hop - PAD_SAMPLES) / SAMPLE_RATE)
+        return [(segment.word.split("(")[0], _frame_seconds(decoder, segment.start_frame), _frame_seconds(decoder, segment.end_frame + 1))
                 for segment in decoder.seg() if segment.word.split("(")[0] in vocabulary]
 
     def _forced(self, samples: np.ndarray, text: str) -> tuple[list[tuple[str, int, int, float]], int]:
@@ -315,8 +313,7 @@ class Aligner:
 
     def _seconds(self, attempt: int, frame: int) -> float:
         """Seconds into the unpadded audio of a frame of SEARCHES[attempt]'s decode of the padded audio."""
-        hop = SAMPLE_RATE // int(self._decoder(attempt).config["frate"])  # samples per frame
-        return (frame * hop - PAD_SAMPLES) / SAMPLE_RATE
+        return _frame_seconds(self._decoder(attempt), frame)
 
     def _phones(self, aligned: list[tuple[str, int, int, float]], attempt: int, duration: float) -> list[Phone]:
         """_align's phones as Phones tiling [0, duration] seconds."""
@@ -411,6 +408,12 @@ def _align(decoder: Decoder, words: list[str], raw: bytes) -> list[tuple[str, in
     if not aligned:
         raise RuntimeError("no phones")
     return aligned
+
+
+def _frame_seconds(decoder: Decoder, frame: int) -> float:
+    """Seconds into the unpadded audio of a frame of the decoder's pass over the padded audio."""
+    hop = SAMPLE_RATE // int(decoder.config["frate"])  # samples per frame
+    return (frame * hop - PAD_SAMPLES) / SAMPLE_RATE
 
 
 def _decode(decoder: Decoder, raw: bytes) -> None:

@@ -156,17 +156,21 @@ class Rig:
         positions[:, self.head] = moved[..., :2]
         return positions
 
-    def _folded(self, positions: np.ndarray) -> np.ndarray:
-        """(T,) bool: frames where a triangle shrinks below MIN_AREA_RATIO of its rest area or
-        flips; triangles inside the mouth or an eye, and those of the lips (corners of the mouth
-        included), may shrink to zero but not flip: lips close and thin to a line."""
-        rest = _signed_areas(self.vertices[None, :, :2], self.triangles)[0]
-        areas = _signed_areas(positions, self.triangles)
-        floor = MIN_AREA_RATIO * rest
+    @functools.cached_property
+    def fold_floor(self) -> np.ndarray:
+        """(M,) the smallest signed area (pixels²) each triangle may keep: MIN_AREA_RATIO of its rest
+        area; triangles inside the mouth or an eye, and those of the lips (corners of the mouth
+        included), may shrink to zero but not flip: lips close and thin to a line. Made once (the
+        fold guard checks every live frame, several times where it scales a frame back)."""
+        floor = MIN_AREA_RATIO * _signed_areas(self.vertices[None, :, :2], self.triangles)[0]
         closable = np.isin(self.triangles, lm.MOUTH).all(axis=1)
         closable[self.eyes] = True
         floor[closable] = -FLIP_TOLERANCE * lm.face_scale(self.landmarks) ** 2
-        return np.any(areas < floor, axis=1)
+        return floor
+
+    def _folded(self, positions: np.ndarray) -> np.ndarray:
+        """(T,) bool: frames where a triangle's area falls below its fold_floor."""
+        return np.any(_signed_areas(positions, self.triangles) < self.fold_floor, axis=1)
 
     def _largest_safe(self, place) -> float:
         """Largest scale in [0, 1] (by bisection) for which `place(scale)` folds nothing; 0 if none."""
