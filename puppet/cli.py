@@ -162,8 +162,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="rebuild the lip-sync network: make the TTS corpus, label it, train, export ONNX (needs the train extra)",
         description="Rebuild the shipped lip-sync models from scratch: synthesise and augment a speech corpus with local "
         "TTS voices, align it with pocketsphinx and compute articulation targets, train the network twice (the live "
-        "model hears 60 ms ahead, the offline one 300 ms; files use the two averaged), export ONNX. Every stage "
-        "resumes where it stopped.",
+        "model hears 60 ms ahead, the offline one 300 ms; files use the two averaged), train each a voice detector "
+        "against made-up music and noise (played by sampled instruments where fluidsynth and a GM soundfont are "
+        "installed: apt-get install fluidsynth fluid-soundfont-gm), export ONNX. Every stage resumes where it stopped.",
     )
     train.add_argument("--corpus", type=Path, default=Path.home() / ".cache" / "puppet" / "corpus", help="corpus folder (default ~/.cache/puppet/corpus)")
     train.add_argument("--hours", type=float, default=6.0, help="hours of speech in the corpus (default 6)")

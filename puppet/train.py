@@ -17,6 +17,10 @@ Only ids with targets and phones are used (labelling may still be running); held
 trained on, only evaluated. Every eval_every steps the last eval_utterances held-out utterances are scored;
 the checkpoint with their lowest position loss is kept as out/best.pt and is the one exported (later steps
 can fit the training voices better and unseen voices worse).
+
+Then a small voice detector (network.VoiceNet, out/voice.pt) learns the corpus's speech against made-up
+music, tones, noise and knocks (puppet.nonspeech), alone and under the speech, and is exported with the
+network: the offsets are scaled down where it is sure nobody speaks (network.GatedNetwork).
 """
 import argparse
 import io
@@ -28,13 +32,14 @@ import time
 import warnings
 import wave
 from dataclasses import asdict, dataclass, field, replace
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
-from puppet import features
+from puppet import features, nonspeech
 from puppet.alignment import PHONES
 from puppet.alignment import SILENCE as SILENT_PHONE
 from puppet.errors import PuppetError
@@ -43,8 +48,10 @@ from puppet.network import (
     LOOKAHEAD,
     N_LANDMARKS,
     Discriminator,
+    GatedNetwork,
     Network,
     NetworkConfig,
+    VoiceNet,
     laplacian_loss,
     lsgan_generator_loss,
     lsgan_losses,
@@ -58,7 +65,7 @@ from puppet.network import (
 from puppet.predictor import N_STEP, SILENCE, audio_steps
 from puppet.visemes import canonical_rest
 
-MODEL_VERSION = "1"  # bump when the exported inputs, outputs or their meaning change
+MODEL_VERSION = "2"  # bump when the exported inputs, outputs or their meaning change
 CHECKPOINT = "checkpoint.pt"
 BEST_CHECKPOINT = "best.pt"  # the checkpoint with the lowest held-out position loss so far: the one exported
 LOG = "log.jsonl"
@@ -98,6 +105,8 @@ class TrainConfig:
     silence_tails: float = 0.1  # share of training windows cut to silence part-way, the mouth easing to rest (see silence_tail)
     tempo_changes: float = 0.0  # share of training windows sped up or slowed down, sound and motion alike (see stretched_window)
     phone_weight: float = 0.0  # the phone classifier's cross-entropy (nats per frame) against positions; 0: none (see phone_loss)
+    voice_steps: int = 3000  # steps training the voice detector exported with the network (see train_voice); 0: none
+    voice_sounds: int = 300  # made-up non-speech clips it trains on (puppet.nonspeech), SOUND_SECONDS each
     network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1))  # ignored when resuming
 
 
@@ -419,22 +428,27 @@ def with_metadata(model: bytes, metadata: dict[str, str]) -> bytes:
     return model + b"".join(_protobuf_field(14, entry) for entry in entries)
 
 
-def export(checkpoint: str | Path, path: str | Path) -> Path:
+def export(checkpoint: str | Path, path: str | Path, voice: str | Path | None = None) -> Path:
     """Write the checkpoint's network as ONNX (time axis dynamic, batch 1) with its metadata, then check
     onnxruntime's outputs against torch's (EXPORT_TOLERANCE). Inputs: steps (1, T, 160), speaker (1, 256),
     h, c, past, valid (the State); outputs: offsets (1, T, 68, 3), rotation (1, T, 3), h_out, c_out,
-    past_out, valid_out."""
+    past_out, valid_out. With a voice detector checkpoint (train_voice), the offsets are gated by it
+    (network.GatedNetwork) and its GRU state is one more input and output: voice_h (1, 1, 64), voice_h_out."""
     import onnxruntime as ort
 
-    model, state = load_network(Path(checkpoint))
+    network, state = load_network(Path(checkpoint))
+    detector, voice_state = load_voice(Path(voice)) if voice is not None else (None, None)
+    model = GatedNetwork(network, detector).eval() if detector is not None else network
     generator = torch.Generator().manual_seed(0)
     speaker = torch.nn.functional.normalize(torch.randn(1, 256, generator=generator), dim=-1)
     warm = torch.randn(1, 23, N_STEP, generator=generator) * 1.5 - 2.5
     steps = torch.randn(1, 37, N_STEP, generator=generator) * 1.5 - 2.5
     with torch.no_grad():
-        start = model.run(warm, speaker, model.initial_state()).state  # a lived-in state, not only zeros
+        start = network.run(warm, speaker, network.initial_state()).state  # a lived-in state, not only zeros
+        if detector is not None:
+            start = (*start, detector(warm, detector.initial_state())[1])
         expected = model(steps, speaker, *start)
-    names = ["h", "c", "past", "valid"]
+    names = ["h", "c", "past", "valid"] + (["voice_h"] if detector is not None else [])
     buffer = io.BytesIO()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -447,14 +461,16 @@ def export(checkpoint: str | Path, path: str | Path) -> Path:
         "feature_spec": json.dumps(features.SPEC),
         "motion_fps": str(features.MOTION_FPS),
         "n_landmarks": str(N_LANDMARKS),
-        "lookahead_frames": str(model.config.lookahead),
-        "window_frames": str(model.config.window),
+        "lookahead_frames": str(network.config.lookahead),
+        "window_frames": str(network.config.window),
         "version": MODEL_VERSION,
         "network": json.dumps(state["model_args"]),
         "training": json.dumps(state.get("training", {})),
         "outputs": "offsets (1,T,68,3) float32 inter-ocular distances from the canonical face, head frame; "
         "rotation (1,T,3) float32 radians (pitch, yaw, roll); output step i is motion frame i - lookahead_frames",
     }
+    if voice_state is not None:
+        metadata["voice_detector"] = json.dumps({"steps": voice_state["step"], "held_out": voice_state["validation"]})
     onnx_bytes = with_metadata(buffer.getvalue(), metadata)
     session = ort.InferenceSession(onnx_bytes, providers=["CPUExecutionProvider"])
     feeds = {"steps": steps.numpy(), "speaker": speaker.numpy(), **{n: s.numpy() for n, s in zip(names, start)}}
@@ -489,6 +505,155 @@ def learning_rate(step: int, config: TrainConfig) -> float:
         return config.lr * (step + 1) / config.warmup_steps
     progress = min(1.0, (step - config.warmup_steps) / max(1, config.steps - config.warmup_steps))
     return config.min_lr + 0.5 * (config.lr - config.min_lr) * (1 + math.cos(math.pi * progress))
+
+
+# -- the voice detector (network.VoiceNet) ---------------------------------------------------------
+
+VOICE_FILE = "voice.pt"  # the voice detector's checkpoint, beside the network's
+VOICE_HIDDEN = 64
+VOICE_WINDOW = 200  # motion frames per training window (4 s)
+VOICE_BATCH = 32
+VOICE_LR = 2e-3  # peak learning rate, cosine decay to a tenth
+VOICE_CHECKPOINT_EVERY = 500
+VOICE_PAUSE_FRAMES = 15  # a silence between words this long (0.3 s) or longer is not speech: the face rests there
+SOUND_SECONDS = 6.0  # each made-up non-speech clip (TrainConfig.voice_sounds of them; a tenth as many more held out)
+SOUND_ONLY = 0.35  # share of windows that are a sound alone
+SOUND_UNDER = 0.4  # share of the other windows with a sound under the speech
+SNR_DB = (-5.0, 25.0)  # speech power over sound power, for a sound under speech and for a lone sound (against a random utterance)
+
+
+def voice_labels(phones: np.ndarray) -> np.ndarray:
+    """(T,) float32: 1 where a frame is speech (a phone, or a silence shorter than VOICE_PAUSE_FRAMES between
+    two phones), else 0; phones (T,) int64 PHONE_CLASSES indices as Utterance.phones."""
+    speaking = np.flatnonzero(phones != SILENT_CLASS)
+    labels = np.zeros(len(phones), np.float32)
+    labels[speaking] = 1.0
+    for last, following in pairwise(speaking):
+        if 1 < following - last <= VOICE_PAUSE_FRAMES:
+            labels[last + 1 : following] = 1.0
+    return labels
+
+
+def sound_bank(count: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """`count` non-speech clips as network steps, each (motion_frame_count(SOUND_SECONDS · 16 kHz), 160) float32."""
+    return [audio_steps(nonspeech.sound(SOUND_SECONDS, rng), 0) for _ in range(count)]
+
+
+def mix(speech: np.ndarray, sound: np.ndarray, snr_db: float, reference: float | None = None) -> np.ndarray:
+    """Steps of speech with a sound under it, both (S, 160) log10 mels, added as mel powers (their cross
+    terms average out over a mel band). The sound is scaled to `snr_db` below the speech's mean power
+    (or below `reference`, a mean power, when given)."""
+    speech_power = np.maximum(10.0 ** speech - features.LOG_FLOOR, 0.0)
+    sound_power = np.maximum(10.0 ** sound - features.LOG_FLOOR, 0.0)
+    target = speech_power.mean() if reference is None else reference
+    gain = target / max(float(sound_power.mean()), 1e-12) * 10.0 ** (-snr_db / 10.0)
+    return np.log10(speech_power + gain * sound_power + features.LOG_FLOOR).astype(np.float32)
+
+
+def voice_batch(utterances: list[Utterance], sounds: list[np.ndarray], lookahead: int, rng: np.random.Generator) -> dict:
+    """steps (B, S + L, 160) and labels (B, S) (1: speech) of random windows, B = VOICE_BATCH, S = VOICE_WINDOW:
+    speech (with or without a sound under it) or a sound alone; output step L + i is label i."""
+    span = VOICE_WINDOW + lookahead
+    steps = np.full((VOICE_BATCH, span, N_STEP), SILENCE, np.float32)
+    labels = np.zeros((VOICE_BATCH, VOICE_WINDOW), np.float32)
+    lengths = np.array([len(u.phones) for u in utterances], np.float64)
+    for b in range(VOICE_BATCH):
+        u = utterances[rng.choice(len(utterances), p=lengths / lengths.sum())]
+        sound = sounds[int(rng.integers(len(sounds)))]
+        start = int(rng.integers(0, len(sound) - span + 1))
+        sound = sound[start : start + span]
+        speech_power = float(np.maximum(10.0 ** u.steps - features.LOG_FLOOR, 0.0).mean())
+        if rng.random() < SOUND_ONLY:
+            steps[b] = mix(np.full_like(sound, SILENCE), sound, rng.uniform(*SNR_DB), reference=speech_power)
+        else:
+            start = int(rng.integers(0, max(1, len(u.phones) - VOICE_WINDOW + 1)))
+            window = u.steps[start : start + span]
+            steps[b, : len(window)] = window
+            said = voice_labels(u.phones)[start : start + VOICE_WINDOW]
+            labels[b, : len(said)] = said
+            if rng.random() < SOUND_UNDER:
+                steps[b] = mix(steps[b], sound, rng.uniform(*SNR_DB))
+        steps[b] = augment_steps(steps[b], rng)
+    return {"steps": torch.from_numpy(steps), "labels": torch.from_numpy(labels)}
+
+
+def voice_scores(model: VoiceNet, utterances: list[Utterance], sounds: list[np.ndarray]) -> dict:
+    """How the detector does on whole held-out utterances and sounds: the mean probability of speech on
+    speech frames, on the utterances' pauses, and on sounds alone, and the share of frames it gets right."""
+    probabilities = {"speech": [], "pauses": [], "sounds": []}
+    with torch.no_grad():
+        for u in utterances:
+            logits, _ = model(torch.from_numpy(u.steps)[None], model.initial_state())
+            p, labels = torch.sigmoid(logits[0, model.lookahead :]).numpy(), voice_labels(u.phones)
+            probabilities["speech"].append(p[labels > 0.5])
+            probabilities["pauses"].append(p[labels < 0.5])
+        for sound in sounds:
+            logits, _ = model(torch.from_numpy(sound)[None], model.initial_state())
+            probabilities["sounds"].append(torch.sigmoid(logits[0]).numpy())
+    joined = {k: np.concatenate(v) if v else np.zeros(0) for k, v in probabilities.items()}
+    right = np.concatenate([joined["speech"] > 0.5, joined["pauses"] < 0.5, joined["sounds"] < 0.5])
+    return {**{f"p_{k}": float(v.mean()) if len(v) else float("nan") for k, v in joined.items()}, "accuracy": float(right.mean())}
+
+
+def train_voice(utterances: list[Utterance], heldout: list[Utterance], config: TrainConfig, lookahead: int) -> Path:
+    """Train (or resume) the voice detector for a network that hears `lookahead` steps ahead, on the
+    corpus's speech against made-up sounds (puppet.nonspeech); saved as out/VOICE_FILE and returned."""
+    path = Path(config.out) / VOICE_FILE
+    rng = np.random.default_rng(config.seed + 1)
+    sounds = sound_bank(config.voice_sounds, rng)
+    heldout_sounds = sound_bank(max(1, config.voice_sounds // 10), np.random.default_rng(config.seed + 2))
+    model = VoiceNet(VOICE_HIDDEN, lookahead)
+    optimizer = torch.optim.Adam(model.parameters(), lr=VOICE_LR)
+    resumed = torch.load(path, map_location="cpu", weights_only=True) if path.exists() else None
+    step = 0
+    if resumed:
+        model.load_state_dict(resumed["model"])
+        optimizer.load_state_dict(resumed["optimizer"])
+        step = resumed["step"]
+        rng.bit_generator.state = json.loads(resumed["rng"])
+    else:
+        mean, std = feature_stats(utterances, lookahead)
+        model.feature_mean.copy_(torch.as_tensor(mean))
+        model.feature_std.copy_(torch.as_tensor(np.maximum(std, 1e-3)))
+
+    def save(validation: dict | None) -> None:
+        save_checkpoint(path, {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "step": step,
+                               "hidden": VOICE_HIDDEN, "lookahead": lookahead, "rng": json.dumps(rng.bit_generator.state),
+                               "validation": validation})
+
+    model.train()
+    with open(Path(config.out) / LOG, "a") as log, \
+            tqdm(total=config.voice_steps, initial=step, desc="voice detector", unit="step", mininterval=1.0) as progress:
+        while step < config.voice_steps:
+            progress_share = step / max(1, config.voice_steps)
+            for group in optimizer.param_groups:
+                group["lr"] = VOICE_LR * (0.55 + 0.45 * math.cos(math.pi * progress_share))
+            batch = voice_batch(utterances, sounds, lookahead, rng)
+            logits, _ = model(batch["steps"], model.initial_state(VOICE_BATCH))
+            loss = torch.nn.functional.binary_cross_entropy_with_logits(logits[:, lookahead:], batch["labels"])
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            step += 1
+            progress.update()
+            progress.set_postfix(loss=f"{loss.item():.4f}", refresh=False)
+            if step % config.log_every == 0:
+                log.write(json.dumps({"voice_step": step, "loss": loss.item()}) + "\n")
+            if step % VOICE_CHECKPOINT_EVERY == 0 and step < config.voice_steps:
+                save(None)
+    model.eval()
+    validation = voice_scores(model, heldout[: config.eval_utterances], heldout_sounds)
+    print("voice detector on held-out voices and sounds: " + ", ".join(f"{k} {v:.3f}" for k, v in validation.items()))
+    save(validation)
+    return path
+
+
+def load_voice(path: Path) -> tuple[VoiceNet, dict]:
+    """The voice detector of a checkpoint (eval mode) and the checkpoint itself."""
+    state = torch.load(path, map_location="cpu", weights_only=True)
+    model = VoiceNet(state["hidden"], state["lookahead"])
+    model.load_state_dict(state["model"])
+    return model.eval(), state
 
 
 # -- the run ---------------------------------------------------------------------------------------
@@ -591,10 +756,12 @@ def train(config: TrainConfig) -> Path:
     if not checkpoint_path.exists():
         checkpoint(validation)  # resumed at or beyond config.steps
     chosen = best_path if best_path.exists() else checkpoint_path
+    voice = train_voice(utterances, heldout, config, lookahead) if config.voice_steps > 0 else None
     if config.export:
         chosen_step = torch.load(chosen, map_location="cpu", weights_only=True)["step"]
         why = ", the lowest held-out position loss" if chosen == best_path else ""
-        print(f"exported {export(chosen, out / ONNX_FILE)} (step {chosen_step}{why})")
+        gated = ", gated by the voice detector" if voice else ""
+        print(f"exported {export(chosen, out / ONNX_FILE, voice)} (step {chosen_step}{why}{gated})")
     return chosen
 
 
@@ -618,6 +785,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--phone-weight", type=float, default=defaults.phone_weight, help=f"weight of the auxiliary phone-classification loss (default {defaults.phone_weight}; 0: none)")
     parser.add_argument("--velocity-weight", type=float, default=defaults.velocity_weight, help=f"weight of the frame-to-frame velocity loss (default {defaults.velocity_weight})")
     parser.add_argument("--mouth-weight", type=float, default=defaults.mouth_weight, help=f"weight of the inner-mouth area loss (default {defaults.mouth_weight}; 0: none)")
+    parser.add_argument("--voice-steps", type=int, default=defaults.voice_steps, help=f"steps training the voice detector exported with the network (default {defaults.voice_steps}; 0: none)")
     parser.add_argument("--threads", type=int, default=defaults.threads)
     parser.add_argument("--device", default=defaults.device, help="torch device, e.g. cuda (default cpu)")
     return parser
@@ -629,7 +797,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         sequence_frames=args.sequence_frames, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
         checkpoint_every=args.checkpoint_every, gan=not args.no_gan, threads=args.threads, device=args.device,
         feature_augment=not args.no_feature_augment, velocity_weight=args.velocity_weight, mouth_weight=args.mouth_weight, tempo_changes=args.tempo_changes,
-        phone_weight=args.phone_weight,
+        phone_weight=args.phone_weight, voice_steps=args.voice_steps,
         network=NetworkConfig(dropout=args.dropout, lookahead=args.lookahead, phone_classes=classifier_size(args.phone_weight)),
     )
 

@@ -5,14 +5,17 @@ torch = pytest.importorskip("torch")
 from puppet.network import (
     LAPLACIAN,
     Discriminator,
+    GatedNetwork,
     Network,
     NetworkConfig,
+    VoiceNet,
     laplacian_loss,
     lsgan_losses,
     mouth_area,
     mouth_area_loss,
     position_loss,
     velocity_loss,
+    voice_weight,
 )
 
 SMALL = NetworkConfig(content_hidden=32, content_mlp=(64, 32), content_code=16, speaker_reduced=16, window=16, speaker_mlp=32)
@@ -137,3 +140,29 @@ def test_discriminator_and_lsgan():
     assert r.shape == (2, 10)
     ones, zeros, mask = torch.ones(2, 10), torch.zeros(2, 10), torch.ones(2, 10)
     assert lsgan_losses(ones, zeros, mask) == 0 and lsgan_losses(zeros, ones, mask) == 2
+
+
+def test_the_voice_detector_streams_and_is_causal_with_its_lookahead():
+    torch.manual_seed(0)
+    voice = VoiceNet(hidden=16, lookahead=3).eval()
+    audio, _ = inputs(40)
+    with torch.no_grad():
+        whole, _ = voice(audio, voice.initial_state())
+        first, h = voice(audio[:, :17], voice.initial_state())
+        rest, _ = voice(audio[:, 17:], h)
+        changed = audio.clone()
+        changed[:, 30:] += 1.0
+        later, _ = voice(changed, voice.initial_state())
+    torch.testing.assert_close(torch.cat([first, rest], 1), whole, atol=1e-6, rtol=0)
+    torch.testing.assert_close(later[:, :30], whole[:, :30])  # output step t hears steps ≤ t only
+    assert (later[:, 30:] != whole[:, 30:]).all()
+
+
+def test_only_a_confident_no_voice_stills_the_face():
+    weight = voice_weight(torch.tensor([-8.0, -2.0, -1.0, 0.0, 3.0]))  # p(speech) 0.0003, 0.12, 0.27, 0.5, 0.95
+    assert weight[0] < 0.002 and 0.45 < weight[1] < 0.5 and (weight[2:] == 1).all()
+
+
+def test_a_gate_must_hear_as_far_ahead_as_its_network():
+    with pytest.raises(ValueError, match="ahead"):
+        GatedNetwork(Network(SMALL), VoiceNet(hidden=8, lookahead=SMALL.lookahead + 1))

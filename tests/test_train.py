@@ -16,6 +16,7 @@ from puppet.train import (
     LOG,
     ONNX_FILE,
     PHONE_CLASSES,
+    VOICE_FILE,
     TrainConfig,
     export,
     load_network,
@@ -90,7 +91,7 @@ def run(tmp_path_factory):
     config = TrainConfig(
         corpus=str(make_corpus(root / "corpus")), out=str(root / "out"), batch_size=8, sequence_frames=64,
         lr=3e-3, warmup_steps=5, steps=30, eval_every=15, checkpoint_every=10, log_every=1, gan=False, export=False,
-        network=TINY, threads=1, phone_weight=0.02,
+        network=TINY, threads=1, phone_weight=0.02, voice_steps=40, voice_sounds=4,
     )
     train(config)
     return config
@@ -121,7 +122,7 @@ def test_resume_continues(run, tmp_path):
 
 def test_gan_step(tmp_path):
     corpus = make_corpus(tmp_path / "corpus", per_voice=1)
-    config = TrainConfig(corpus=str(corpus), out=str(tmp_path / "out"), batch_size=2, sequence_frames=32, steps=2, log_every=1, gan=True, export=False, network=TINY, threads=1)
+    config = TrainConfig(corpus=str(corpus), out=str(tmp_path / "out"), batch_size=2, sequence_frames=32, steps=2, log_every=1, gan=True, export=False, network=TINY, threads=1, voice_steps=0)
     train(config)
     lines = [line for line in log_lines(tmp_path / "out") if "train" in line]
     assert all(np.isfinite(line["train"]["discriminator"]) and np.isfinite(line["train"]["adversarial"]) for line in lines)
@@ -264,3 +265,60 @@ def test_the_checkpoint_with_the_lowest_held_out_loss_is_kept_and_exported(run, 
     _, kept = load_network(chosen)
     assert kept["step"] in (35, 40) and kept["training"]["validation"]["position"] < 1e9
     assert json.loads(Predictor(out / ONNX_FILE).metadata["training"])["steps"] == kept["step"]
+
+
+def test_voice_labels_bridge_short_pauses_only():
+    from puppet.train import SILENT_CLASS, VOICE_PAUSE_FRAMES, voice_labels
+
+    said = PHONE_CLASSES.index("AA")
+    phones = np.full(60, SILENT_CLASS)
+    phones[5:10] = phones[12:20] = phones[20 + VOICE_PAUSE_FRAMES + 1 : 40] = said  # a 2-frame and a 16-frame pause
+    labels = voice_labels(phones)
+    np.testing.assert_array_equal(np.flatnonzero(labels), np.r_[5:20, 36:40])
+
+
+def test_a_sound_is_mixed_under_speech_at_the_asked_ratio():
+    from puppet.train import mix
+
+    rng = np.random.default_rng(0)
+    speech, sound = rng.uniform(-3, -1, (50, 160)).astype(np.float32), rng.uniform(-4, -2, (50, 160)).astype(np.float32)
+
+    def power(steps):
+        return np.maximum(10.0**steps - features.LOG_FLOOR, 0).mean()
+
+    mixed = mix(speech, sound, 10.0)
+    assert power(mixed) == pytest.approx(1.1 * power(speech), rel=1e-3)  # the sound adds a tenth
+    silence = np.full_like(sound, np.log10(features.LOG_FLOOR))
+    alone = mix(silence, sound, 0.0, reference=power(speech))  # a lone sound as loud as the speech
+    assert power(alone) == pytest.approx(power(speech), rel=1e-3)
+
+
+def test_the_voice_detector_learns_and_its_gate_is_exported(run, tmp_path):
+    """Its loss falls; exported with the network, the offsets are scaled by voice_weight and onnxruntime
+    agrees with torch; the predictor carries its state, so a stream still equals the whole clip."""
+    from puppet.network import GatedNetwork, voice_weight
+    from puppet.predictor import Predictor, audio_steps
+    from puppet.train import load_voice, read_wav
+
+    losses = [line["loss"] for line in log_lines(Path(run.out)) if "voice_step" in line]
+    assert len(losses) == 40 and np.mean(losses[-5:]) < 0.8 * np.mean(losses[:5])
+    path = export(Path(run.out, CHECKPOINT), tmp_path / ONNX_FILE, Path(run.out, VOICE_FILE))
+    network, _ = load_network(Path(run.out, CHECKPOINT))
+    detector, state = load_voice(Path(run.out, VOICE_FILE))
+    assert state["step"] == 40 and 0 <= state["validation"]["accuracy"] <= 1
+    samples = read_wav(Path(run.corpus, "audio", "low00.wav"))
+    speaker = np.load(Path(run.corpus, "embeddings", "low00.npy"))
+    steps = torch.from_numpy(audio_steps(samples, network.config.lookahead)[None])
+    with torch.no_grad():
+        plain = network.run(steps, torch.from_numpy(speaker[None]), network.initial_state()).offsets
+        gated = GatedNetwork(network, detector)(steps, torch.from_numpy(speaker[None]), *network.initial_state(), detector.initial_state())[0]
+        weight = voice_weight(detector(steps, detector.initial_state())[0])
+    torch.testing.assert_close(gated, plain * weight[..., None, None])
+    predictor = Predictor(path)
+    lookahead = network.config.lookahead
+    offsets, _ = predictor.predict(samples, speaker)
+    np.testing.assert_allclose(offsets, gated[0, lookahead:].numpy(), atol=1e-4, rtol=0)
+    stream = predictor.stream(speaker)
+    pieces = [stream.push(samples[i : i + 700])[0] for i in range(0, len(samples), 700)] + [stream.finish()[0]]
+    np.testing.assert_allclose(np.concatenate(pieces), offsets, atol=1e-5, rtol=0)
+    assert "voice_detector" in predictor.metadata
