@@ -183,6 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--corpus", type=Path, help="corpus folder: its held-out speakers are scored")
     evaluate.add_argument("--videos", type=Path, help="folder of talking-face videos with speech (.mp4, .mov, .mkv)")
     evaluate.add_argument("--speech", type=Path, help="folder of real recordings with transcripts (NAME.wav + NAME.txt): what the mouth does on p/b/m, vowels, oo/ee and silence")
+    evaluate.add_argument("--sounds", type=Path, metavar="DIR", help="folder of audio with nobody speaking (music, noise, typing): how far the mouth opens on it")
     evaluate.add_argument("--labels", type=int, metavar="N", help="score the training labels themselves: N sentences by festival, the aligner's phones against festival's own times (needs festival)")
     evaluate.add_argument("--json", type=Path, help="also write the scores here")
     evaluate.add_argument("--plots", type=Path, metavar="DIR", help="also draw each video's lip opening over time, real against each source, as DIR/NAME.png")
@@ -371,11 +372,13 @@ def _evaluate(args: argparse.Namespace) -> int:
         score_corpus,
         score_labels,
         score_phones,
+        score_sounds,
         score_videos,
     )
 
-    if args.corpus is None and args.videos is None and args.speech is None and args.labels is None:
-        raise PuppetError("give --corpus DIR (held-out synthetic voices), --videos DIR (real talking videos), --speech DIR (recordings with transcripts) and/or --labels N")
+    if all(value is None for value in (args.corpus, args.videos, args.speech, args.sounds, args.labels)):
+        raise PuppetError("give --corpus DIR (held-out synthetic voices), --videos DIR (real talking videos), --speech DIR (recordings "
+                          "with transcripts), --sounds DIR (audio with nobody speaking) and/or --labels N")
     if args.labels is not None and args.labels < 1:
         raise PuppetError("--labels needs a number of sentences, 1 or more")
     if args.json and args.json.exists() and not args.force:
@@ -397,6 +400,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.speech is not None:
         results["speech"] = score_phones(args.speech)
         print(format_table(f"real recordings, mouth per sound ({args.speech})", results["speech"]))
+    if args.sounds is not None:
+        results["sounds"] = score_sounds(args.sounds)
+        print(format_table(f"nobody speaking, lip opening ({args.sounds})", results["sounds"]))
     if args.labels is not None:
         results["labels"] = score_labels(args.labels)
         print(format_table(f"training labels: aligned phones against festival's own ({args.labels} sentences)", results["labels"]["motion"]))

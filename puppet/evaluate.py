@@ -314,6 +314,29 @@ def score_phones(folder: Path) -> dict:
     }
 
 
+AUDIO_SUFFIXES = (".wav", ".flac", ".mp3", ".ogg", ".oga", ".opus", ".m4a", ".aac")
+
+
+def score_sounds(folder: Path) -> dict:
+    """What the mouth does on audio where nobody speaks (music, noise, typing: every audio file in a
+    folder). Per source, in IOD units: the inner-lip opening averaged over each file's frames, then
+    over the files (mean), and its largest file mean (worst); the canonical face rests at rest_gap."""
+    from puppet.visemes import canonical_rest
+
+    files = sorted(p for p in Path(folder).glob("*") if p.suffix.lower() in AUDIO_SUFFIXES)
+    if not files:
+        raise PuppetError(f"no audio files ({', '.join(AUDIO_SUFFIXES)}) in {folder}")
+    canonical = canonical_rest()
+    sources = baselines(canonical)
+    found: dict[str, list[float]] = {name: [] for name in sources}
+    for path in files:
+        samples = audio.load(path)
+        for name, source in sources.items():
+            found[name].append(float(lip_opening(canonical[None] + source(samples)[0]).mean()))
+    rest = float(lip_opening(canonical[None])[0])
+    return {name: {"rest_gap": rest, "mean_gap": float(np.mean(v)), "worst_gap": float(np.max(v))} for name, v in found.items()}
+
+
 def score_labels(sentences: int, voices: tuple[str, ...] = ("kal_diphone", "cmu_us_slt_arctic_hts")) -> dict:
     """How exact the training labels are: festival says corpus-like sentences (its voices in turn),
     and the mouth motion made from puppet's aligned phones is scored against the motion made from the

@@ -77,3 +77,30 @@ def test_training_labels_are_scored_against_festivals_own_phone_times():
     assert scores["boundaries"]["median_ms"] <= 20 and scores["boundaries"]["within_20ms"] > 0.6
     assert aligned["D-A"] < 6 and aligned["lip_corr"] > 0.9
     assert 0 < late["D-LL"] and late["lip_corr"] < 1
+
+
+def test_sounds_with_nobody_speaking_are_scored_by_how_far_the_mouth_opens(tmp_path, monkeypatch):
+    """Music and typing made up from seeds training never drew: the learned sources keep the lips near
+    rest where the loudness baseline opens them; a folder without audio is refused."""
+    import wave
+
+    from puppet import lipsync, nonspeech
+    from puppet.errors import PuppetError
+
+    if not lipsync.has_model():
+        pytest.skip("no trained model in assets/models")
+    monkeypatch.setattr(nonspeech, "soundfont", lambda: None)  # the same sounds with or without fluidsynth
+    for name, clip in {"music": nonspeech.music(64000, np.random.default_rng(31)),
+                       "typing": nonspeech.knocks(64000, np.random.default_rng(32))}.items():
+        with wave.open(str(tmp_path / f"{name}.wav"), "wb") as f:
+            f.setnchannels(1), f.setsampwidth(2), f.setframerate(16000)
+            f.writeframes((nonspeech._normalised(clip) * 32767).astype("<i2").tobytes())
+    (tmp_path / "notes.txt").write_text("not audio")
+    scores = evaluate.score_sounds(tmp_path)
+    rest = scores["learned"]["rest_gap"]
+    assert scores["static"]["mean_gap"] == pytest.approx(rest) and scores["static"]["worst_gap"] == pytest.approx(rest)
+    for name in ("learned", "learned-live"):
+        assert scores[name]["worst_gap"] < rest + 0.02
+    assert scores["loudness"]["mean_gap"] > rest + 0.05
+    with pytest.raises(PuppetError, match="no audio files"):
+        evaluate.score_sounds(tmp_path / "nothing")
