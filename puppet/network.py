@@ -9,6 +9,8 @@ hears LOOKAHEAD motion frames (80 ms) of future audio and nothing beyond:
                      → embedding (→ d_model 32) → 2 causal self-attention layers (2 heads, window 256)
                      → MLP_s → head rotation (3) and expression offsets Δp (204)
     output:          offsets = Δq + Δp (68 × 3, soft-limited), rotation (3, soft-limited)
+    exported with:   a voice detector (VoiceNet, a small GRU on the same steps) scaling the offsets
+                     down where nobody speaks (GatedNetwork): music, typing and hum leave the face at rest
 
 The paper's content window [t, t + 18] and its non-causal 256-frame attention become, here, an LSTM
 that runs forward only and an attention that looks back over the last 256 steps. Both carry their
