@@ -539,12 +539,16 @@ def sound_bank(count: int, rng: np.random.Generator) -> list[np.ndarray]:
     return [audio_steps(nonspeech.sound(SOUND_SECONDS, rng), 0) for _ in range(count)]
 
 
+def mel_power(steps: np.ndarray) -> np.ndarray:
+    """Mel power of log10-mel steps, the LOG_FLOOR that features.log_mel adds to silence taken back off."""
+    return np.maximum(10.0**steps - features.LOG_FLOOR, 0.0)
+
+
 def mix(speech: np.ndarray, sound: np.ndarray, snr_db: float, reference: float | None = None) -> np.ndarray:
     """Steps of speech with a sound under it, both (S, 160) log10 mels, added as mel powers (their cross
     terms average out over a mel band). The sound is scaled to `snr_db` below the speech's mean power
     (or below `reference`, a mean power, when given)."""
-    speech_power = np.maximum(10.0 ** speech - features.LOG_FLOOR, 0.0)
-    sound_power = np.maximum(10.0 ** sound - features.LOG_FLOOR, 0.0)
+    speech_power, sound_power = mel_power(speech), mel_power(sound)
     target = speech_power.mean() if reference is None else reference
     gain = target / max(float(sound_power.mean()), 1e-12) * 10.0 ** (-snr_db / 10.0)
     return np.log10(speech_power + gain * sound_power + features.LOG_FLOOR).astype(np.float32)
@@ -557,14 +561,14 @@ def voice_batch(utterances: list[Utterance], sounds: list[np.ndarray], lookahead
     steps = np.full((VOICE_BATCH, span, N_STEP), SILENCE, np.float32)
     labels = np.zeros((VOICE_BATCH, VOICE_WINDOW), np.float32)
     lengths = np.array([len(u.phones) for u in utterances], np.float64)
+    chances = lengths / lengths.sum()  # utterances drawn in proportion to their length
     for b in range(VOICE_BATCH):
-        u = utterances[rng.choice(len(utterances), p=lengths / lengths.sum())]
+        u = utterances[rng.choice(len(utterances), p=chances)]
         sound = sounds[int(rng.integers(len(sounds)))]
         start = int(rng.integers(0, len(sound) - span + 1))
         sound = sound[start : start + span]
-        speech_power = float(np.maximum(10.0 ** u.steps - features.LOG_FLOOR, 0.0).mean())
-        if rng.random() < SOUND_ONLY:
-            steps[b] = mix(np.full_like(sound, SILENCE), sound, rng.uniform(*SNR_DB), reference=speech_power)
+        if rng.random() < SOUND_ONLY:  # as loud as the drawn utterance, give or take SNR_DB
+            steps[b] = mix(np.full_like(sound, SILENCE), sound, rng.uniform(*SNR_DB), reference=float(mel_power(u.steps).mean()))
         else:
             start = int(rng.integers(0, max(1, len(u.phones) - VOICE_WINDOW + 1)))
             window = u.steps[start : start + span]
@@ -599,12 +603,14 @@ def train_voice(utterances: list[Utterance], heldout: list[Utterance], config: T
     """Train (or resume) the voice detector for a network that hears `lookahead` steps ahead, on the
     corpus's speech against made-up sounds (puppet.nonspeech); saved as out/VOICE_FILE and returned."""
     path = Path(config.out) / VOICE_FILE
+    resumed = torch.load(path, map_location="cpu", weights_only=True) if path.exists() else None
+    if resumed and resumed["step"] >= config.voice_steps and resumed["validation"] is not None:
+        return path  # trained and scored already: making its sounds again would change nothing
     rng = np.random.default_rng(config.seed + 1)
     sounds = sound_bank(config.voice_sounds, rng)
     heldout_sounds = sound_bank(max(1, config.voice_sounds // 10), np.random.default_rng(config.seed + 2))
     model = VoiceNet(VOICE_HIDDEN, lookahead)
     optimizer = torch.optim.Adam(model.parameters(), lr=VOICE_LR)
-    resumed = torch.load(path, map_location="cpu", weights_only=True) if path.exists() else None
     step = 0
     if resumed:
         model.load_state_dict(resumed["model"])
