@@ -23,7 +23,6 @@ music, tones, noise and knocks (puppet.nonspeech), alone and under the speech, a
 network: the offsets are scaled down where it is sure nobody speaks (network.GatedNetwork).
 """
 import argparse
-import functools
 import io
 import json
 import math
@@ -106,11 +105,8 @@ class TrainConfig:
     silence_tails: float = 0.1  # share of training windows cut to silence part-way, the mouth easing to rest (see silence_tail)
     tempo_changes: float = 0.0  # share of training windows sped up or slowed down, sound and motion alike (see stretched_window)
     phone_weight: float = 0.0  # the phone classifier's cross-entropy (nats per frame) against positions; 0: none (see phone_loss)
-    sound_steps: int = 2000  # steps of a last phase with made-up sounds under the speech (see train_through_sounds); 0: none
-    sound_under: float = 0.5  # share of that phase's training windows with a sound under the speech
-    sound_lr: float = 2e-4  # that phase's peak learning rate (warm-up, then cosine decay to min_lr)
     voice_steps: int = 3000  # steps training the voice detector exported with the network (see train_voice); 0: none
-    voice_sounds: int = 300  # made-up non-speech clips both train on (puppet.nonspeech), SOUND_SECONDS each
+    voice_sounds: int = 300  # made-up non-speech clips it trains on (puppet.nonspeech), SOUND_SECONDS each
     network: NetworkConfig = field(default_factory=lambda: NetworkConfig(dropout=0.1))  # ignored when resuming
 
 
@@ -219,12 +215,10 @@ def load_corpus(corpus: Path, lookahead: int) -> tuple[list[Utterance], list[Utt
     return train, heldout
 
 
-def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: int, rng: np.random.Generator,
-                 sounds: tuple[np.ndarray, ...] = ()) -> dict:
+def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: int, rng: np.random.Generator) -> dict:
     """A batch of random windows, utterances drawn in proportion to their length:
     steps (B, S + L, 160), speaker (B, 256), offsets (B, S, 68, 3), rotation (B, S, 3), phones (B, S), mask (B, S),
-    where network output step L + i is target frame i (S = sequence_frames, L = lookahead). Given sounds
-    (steps as sound_bank's), config.sound_under of the windows get one under the speech (with_sound_under)."""
+    where network output step L + i is target frame i (S = sequence_frames, L = lookahead)."""
     frames = config.sequence_frames
     lengths = np.array([len(u.offsets) for u in utterances], np.float64)
     batch = {
@@ -242,8 +236,6 @@ def sample_batch(utterances: list[Utterance], config: TrainConfig, lookahead: in
         start = int(rng.integers(0, max(1, len(u.offsets) - span + 1)))
         n = min(frames, int((len(u.offsets) - start) / rate))
         window, offsets, rotation, phones = stretched_window(u, start, n, lookahead, rate)
-        if sounds and rng.random() < config.sound_under:
-            window = with_sound_under(window, sounds, rng)
         batch["steps"][b, : n + lookahead] = augment_steps(window, rng) if config.feature_augment else window
         batch["speaker"][b] = u.speaker
         batch["offsets"][b, :n] = offsets
@@ -299,18 +291,6 @@ def augment_steps(steps: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         mel[..., low : low + width] = mel[~silent].mean() if (~silent).any() else SILENCE
     mel[silent] = SILENCE
     return mel.reshape(steps.shape).astype(np.float32)
-
-
-SPEECH_OVER_SOUND_DB = (0.0, 25.0)  # a music bed sits 10–25 dB under a narration; a loud room, less
-
-
-def with_sound_under(steps: np.ndarray, sounds: tuple[np.ndarray, ...], rng: np.random.Generator) -> np.ndarray:
-    """(S, 160) speech steps with a random stretch of a random sound (looped if shorter) mixed under them at
-    a random SPEECH_OVER_SOUND_DB: the mouth must follow the voice through music, tones and noise."""
-    sound = sounds[int(rng.integers(len(sounds)))]
-    start = int(rng.integers(0, len(sound)))
-    stretch = np.take(sound, np.arange(start, start + len(steps)) % len(sound), axis=0)
-    return mix(steps, stretch, rng.uniform(*SPEECH_OVER_SOUND_DB))
 
 
 REST_FRAMES = 5  # after a silence tail's cut the mouth eases to rest over this many frames (100 ms)
@@ -559,14 +539,6 @@ def sound_bank(count: int, rng: np.random.Generator) -> list[np.ndarray]:
     return [audio_steps(nonspeech.sound(SOUND_SECONDS, rng), 0) for _ in range(count)]
 
 
-@functools.cache
-def training_sounds(count: int, seed: int) -> tuple[tuple[np.ndarray, ...], str]:
-    """The made-up sounds that train_through_sounds and the voice detector train on (sound_bank, drawn with
-    `seed`), and the generator's state after drawing them (JSON): the detector's batches are drawn on from there."""
-    rng = np.random.default_rng(seed)
-    return tuple(sound_bank(count, rng)), json.dumps(rng.bit_generator.state)
-
-
 def mel_power(steps: np.ndarray) -> np.ndarray:
     """Mel power of log10-mel steps, the LOG_FLOOR that features.log_mel adds to silence taken back off."""
     return np.maximum(10.0**steps - features.LOG_FLOOR, 0.0)
@@ -634,9 +606,8 @@ def train_voice(utterances: list[Utterance], heldout: list[Utterance], config: T
     resumed = torch.load(path, map_location="cpu", weights_only=True) if path.exists() else None
     if resumed and resumed["step"] >= config.voice_steps and resumed["validation"] is not None:
         return path  # trained and scored already: making its sounds again would change nothing
-    sounds, drawn = training_sounds(config.voice_sounds, config.seed + 1)
-    rng = np.random.default_rng()
-    rng.bit_generator.state = json.loads(drawn)
+    rng = np.random.default_rng(config.seed + 1)
+    sounds = sound_bank(config.voice_sounds, rng)
     heldout_sounds = sound_bank(max(1, config.voice_sounds // 10), np.random.default_rng(config.seed + 2))
     model = VoiceNet(VOICE_HIDDEN, lookahead)
     optimizer = torch.optim.Adam(model.parameters(), lr=VOICE_LR)
@@ -694,107 +665,6 @@ def load_voice(path: Path) -> tuple[VoiceNet, dict]:
 # -- the run ---------------------------------------------------------------------------------------
 
 
-def training_state(model: Network, optimizer, discriminator: Discriminator | None, d_optimizer, step: int,
-                   config: TrainConfig, training: dict, rng: np.random.Generator) -> dict:
-    """A checkpoint: everything a run resumes from exactly, and `training`, the summary exported as metadata."""
-    state = {
-        "model_args": asdict(model.config), "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-        "step": step, "config": json.dumps(asdict(config)), "training": training,
-        "rng": {"torch": torch.get_rng_state(), "numpy": json.dumps(rng.bit_generator.state)},
-    }
-    if discriminator is not None:
-        state["discriminator"], state["d_optimizer"] = discriminator.state_dict(), d_optimizer.state_dict()
-    return state
-
-
-def optimize(model: Network, optimizer, discriminator: Discriminator | None, d_optimizer, batch: dict, config: TrainConfig) -> dict:
-    """One optimizer step of the network (and of the discriminator, Eq. 11, when there is one) on a batch;
-    the loss terms as floats."""
-    lookahead = model.config.lookahead
-    loss, (out, fake), terms = generator_losses(model, batch, config, discriminator)
-    optimizer.zero_grad(set_to_none=True)
-    loss.backward()
-    torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
-    optimizer.step()
-    if discriminator is not None:
-        # Eq. 11: the discriminator learns real (training) motion from generated motion.
-        context = discriminator_context(out, lookahead)
-        real = discriminator(batch["offsets"], batch["rotation"], *context)
-        generated = discriminator(fake.detach(), out.rotation[:, lookahead:].detach(), *context)
-        d_loss = lsgan_losses(real, generated, batch["mask"])
-        d_optimizer.zero_grad(set_to_none=True)
-        d_loss.backward()
-        torch.nn.utils.clip_grad_norm_(discriminator.parameters(), config.grad_clip)
-        d_optimizer.step()
-        terms["discriminator"] = float(d_loss.detach())
-    return terms
-
-
-SOUNDS_CHECKPOINT = "sounds.pt"  # the network after train_through_sounds, exported when that phase runs
-
-
-def train_through_sounds(start: Path, utterances: list[Utterance], validation_utterances: list[Utterance], config: TrainConfig) -> Path:
-    """Go on from checkpoint `start` (the main phase's choice) for config.sound_steps steps with made-up
-    sounds (training_sounds) under config.sound_under of the windows, at SPEECH_OVER_SOUND_DB, so the mouth
-    keeps following a voice through a music bed, beeps or a noisy room; the main phase's speech never had
-    a sound under it and its lips stopped closing on p/b/m over music. Learning rate: warm-up to
-    config.sound_lr, cosine decay to min_lr. Resumable; saved as out/SOUNDS_CHECKPOINT, whose last step is
-    returned (held-out scores on clean speech kept in its `training`)."""
-    path = Path(config.out) / SOUNDS_CHECKPOINT
-    origin = torch.load(start, map_location="cpu", weights_only=True)
-    resumed = torch.load(path, map_location="cpu", weights_only=True) if path.exists() else None
-    if resumed and resumed["training"]["steps"] != origin["step"]:
-        resumed = None  # begun from another checkpoint of the main phase (it has trained on since): begin again
-    if resumed and resumed["step"] >= config.sound_steps:
-        return path
-    state = resumed or origin
-    network = network_config(state["model_args"])
-    model = Network(network).to(config.device)
-    model.load_state_dict(state["model"])
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.sound_lr)
-    optimizer.load_state_dict(state["optimizer"])
-    discriminator = d_optimizer = None
-    if config.gan and "discriminator" in state:
-        discriminator = Discriminator(network).to(config.device)
-        discriminator.load_state_dict(state["discriminator"])
-        d_optimizer = torch.optim.Adam(discriminator.parameters(), lr=config.sound_lr, betas=(0.5, 0.999))
-        d_optimizer.load_state_dict(state["d_optimizer"])
-    sounds, _ = training_sounds(config.voice_sounds, config.seed + 1)
-    rng = np.random.default_rng(config.seed + 3)
-    torch.manual_seed(config.seed + 3)
-    step = 0
-    if resumed:
-        step = resumed["step"]
-        torch.set_rng_state(resumed["rng"]["torch"])
-        rng.bit_generator.state = json.loads(resumed["rng"]["numpy"])
-    schedule = replace(config, lr=config.sound_lr, steps=config.sound_steps)
-    training = dict(state["training"])
-
-    model.train()
-    with open(Path(config.out) / LOG, "a") as log, \
-            tqdm(total=config.sound_steps, initial=step, desc="through sounds", unit="step", mininterval=1.0) as progress:
-        while step < config.sound_steps:
-            lr = learning_rate(step, schedule)
-            for group in optimizer.param_groups + (d_optimizer.param_groups if d_optimizer else []):
-                group["lr"] = lr
-            batch = sample_batch(utterances, config, network.lookahead, rng, sounds)
-            terms = optimize(model, optimizer, discriminator, d_optimizer, batch, config)
-            step += 1
-            progress.update()
-            if step % config.log_every == 0:
-                progress.set_postfix(loss=f"{terms['total']:.4f}", refresh=False)
-                log.write(json.dumps({"sound_step": step, "lr": lr, "train": terms}) + "\n")
-                log.flush()
-            if step == config.sound_steps and validation_utterances:
-                training["validation"] = evaluate(model, validation_utterances, config)
-                log.write(json.dumps({"sound_step": step, "validation": training["validation"]}) + "\n")
-                progress.write(f"through sounds, step {step}: held-out {training['validation']['total']:.4f}")
-            if step % config.checkpoint_every == 0 or step == config.sound_steps:
-                training["sound_steps"] = step
-                save_checkpoint(path, training_state(model, optimizer, discriminator, d_optimizer, step, config, training, rng))
-    return path
-
-
 def train(config: TrainConfig) -> Path:
     """Train (or resume) to config.steps; returns the path of the checkpoint exported (the ONNX model
     lies beside it): the one with the lowest held-out position loss, the last one without held-out speakers."""
@@ -838,7 +708,14 @@ def train(config: TrainConfig) -> Path:
             "steps": step, "seed": config.seed, "corpus": str(config.corpus), "utterances": len(utterances),
             "speakers": len(speakers), "heldout_utterances": len(heldout), "validation": validation,
         }
-        save_checkpoint(path, training_state(model, optimizer, discriminator, d_optimizer, step, config, training, rng))
+        state = {
+            "model_args": asdict(network), "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+            "step": step, "config": json.dumps(asdict(config)), "training": training,
+            "rng": {"torch": torch.get_rng_state(), "numpy": json.dumps(rng.bit_generator.state)},
+        }
+        if config.gan:
+            state["discriminator"], state["d_optimizer"] = discriminator.state_dict(), d_optimizer.state_dict()
+        save_checkpoint(path, state)
 
     # The loop.
     model.train()
@@ -849,7 +726,23 @@ def train(config: TrainConfig) -> Path:
             lr = learning_rate(step, config)
             for group in optimizer.param_groups + (d_optimizer.param_groups if config.gan else []):
                 group["lr"] = lr
-            terms = optimize(model, optimizer, discriminator, d_optimizer, sample_batch(utterances, config, lookahead, rng), config)
+            batch = sample_batch(utterances, config, lookahead, rng)
+            loss, (out_, fake), terms = generator_losses(model, batch, config, discriminator)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
+            optimizer.step()
+            if config.gan:
+                # Eq. 11: the discriminator learns real (training) motion from generated motion.
+                context = discriminator_context(out_, lookahead)
+                real = discriminator(batch["offsets"], batch["rotation"], *context)
+                generated = discriminator(fake.detach(), out_.rotation[:, lookahead:].detach(), *context)
+                d_loss = lsgan_losses(real, generated, batch["mask"])
+                d_optimizer.zero_grad(set_to_none=True)
+                d_loss.backward()
+                torch.nn.utils.clip_grad_norm_(discriminator.parameters(), config.grad_clip)
+                d_optimizer.step()
+                terms["discriminator"] = float(d_loss.detach())
             step += 1
             progress.update()
             if step % config.log_every == 0 or step == config.steps:
@@ -869,12 +762,12 @@ def train(config: TrainConfig) -> Path:
     if not checkpoint_path.exists():
         checkpoint(validation)  # resumed at or beyond config.steps
     chosen = best_path if best_path.exists() else checkpoint_path
-    if config.sound_steps > 0:
-        chosen = train_through_sounds(chosen, utterances, validation_utterances, config)
     voice = train_voice(utterances, heldout, config, lookahead) if config.voice_steps > 0 else None
     if config.export:
+        chosen_step = torch.load(chosen, map_location="cpu", weights_only=True)["step"]
+        why = ", the lowest held-out position loss" if chosen == best_path else ""
         gated = ", gated by the voice detector" if voice else ""
-        print(f"exported {export(chosen, out / ONNX_FILE, voice)} (the network of {chosen.name}{gated})")
+        print(f"exported {export(chosen, out / ONNX_FILE, voice)} (step {chosen_step}{why}{gated})")
     return chosen
 
 
@@ -898,7 +791,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--phone-weight", type=float, default=defaults.phone_weight, help=f"weight of the auxiliary phone-classification loss (default {defaults.phone_weight}; 0: none)")
     parser.add_argument("--velocity-weight", type=float, default=defaults.velocity_weight, help=f"weight of the frame-to-frame velocity loss (default {defaults.velocity_weight})")
     parser.add_argument("--mouth-weight", type=float, default=defaults.mouth_weight, help=f"weight of the inner-mouth area loss (default {defaults.mouth_weight}; 0: none)")
-    parser.add_argument("--sound-steps", type=int, default=defaults.sound_steps, help=f"steps of a last phase with made-up music, tones and noise under the speech (default {defaults.sound_steps}; 0: none)")
     parser.add_argument("--voice-steps", type=int, default=defaults.voice_steps, help=f"steps training the voice detector exported with the network (default {defaults.voice_steps}; 0: none)")
     parser.add_argument("--threads", type=int, default=defaults.threads)
     parser.add_argument("--device", default=defaults.device, help="torch device, e.g. cuda (default cpu)")
@@ -911,7 +803,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         sequence_frames=args.sequence_frames, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
         checkpoint_every=args.checkpoint_every, gan=not args.no_gan, threads=args.threads, device=args.device,
         feature_augment=not args.no_feature_augment, velocity_weight=args.velocity_weight, mouth_weight=args.mouth_weight, tempo_changes=args.tempo_changes,
-        phone_weight=args.phone_weight, sound_steps=args.sound_steps, voice_steps=args.voice_steps,
+        phone_weight=args.phone_weight, voice_steps=args.voice_steps,
         network=NetworkConfig(dropout=args.dropout, lookahead=args.lookahead, phone_classes=classifier_size(args.phone_weight)),
     )
 
