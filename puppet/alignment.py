@@ -309,7 +309,8 @@ class Aligner:
                 return _align(self._decoder(attempt), words, raw), attempt
             except RuntimeError as error:
                 reason = error
-        raise PuppetError(f"cannot align {len(samples) / SAMPLE_RATE:.2f} s of audio to {' '.join(text.split())[:60]!r}: {reason}")
+        raise PuppetError(f"cannot align {len(samples) / SAMPLE_RATE:.2f} s of audio to {' '.join(text.split())[:60]!r}: {reason}; "
+                          "are those the words spoken? (Loud music or noise under the voice can also defeat the aligner)")
 
     def _seconds(self, attempt: int, frame: int) -> float:
         """Seconds into the unpadded audio of a frame of SEARCHES[attempt]'s decode of the padded audio."""
