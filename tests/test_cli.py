@@ -1,4 +1,5 @@
 """The `puppet` command as a user meets it: bad input ends in one line and exit 2, nothing left behind."""
+import sys
 import wave
 
 import cv2
@@ -175,6 +176,13 @@ def test_eval_keeps_existing_results(files, capsys):
     fails(capsys, ["eval", "--labels", "0"], "1 or more")
     fails(capsys, ["eval"], "--labels N")
     assert scores.read_bytes() == b"{}" and (plots / "old.png").read_bytes() == b"x"
+
+
+def test_train_without_onnx_stops_before_building_anything(files, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "onnx", None)  # as if the train extra were installed without it
+    corpus = files["dir"] / "corpus"
+    fails(capsys, ["train", "--corpus", corpus, "--out", files["dir"] / "runs"], "onnx is missing")
+    assert not corpus.exists()
 
 
 def test_a_bad_option_is_one_line(capsys):
