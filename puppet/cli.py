@@ -341,6 +341,7 @@ def canonical_face_pixels():
 def _train(args: argparse.Namespace) -> int:
     try:
         import onnx  # noqa: F401  torch.onnx.export writes through it: missing, it would fail only after hours of training
+
         from puppet import corpus, labels, train
     except ImportError as error:
         raise PuppetError(f"training needs the train extra ({error.name} is missing): pip install 'puppet[train]'") from None
