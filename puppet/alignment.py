@@ -31,6 +31,10 @@ speech heard where the script has no words is reported as a poor fit. A recognis
 the script's words finds some of them in any speech, so a script is anchored only if at least
 ANCHORED_SHARE of its words are pinned; otherwise the whole alignment stands.
 
+With no script at all, `heard` recognises the words with the wheel's general US English language
+model (as Rhubarb Lip Sync does) and aligns those: a recogniser's words are often wrong, but mostly
+by sound-alikes ("guess would" for "Dashwood"), and the mouth needs only their phones.
+
 The acoustic model and dictionary ship in the pocketsphinx wheel (US English, CMU ARPAbet without
 stress marks, 39 phones + SIL).
 """
@@ -185,6 +189,7 @@ class Aligner:
         self.decoders: list[Decoder] = []  # made on first need, one per entry of SEARCHES
         self.phone_loops: list[Decoder] = []  # the same, searching a free phone loop
         self.recogniser: Decoder | None = None  # recognises a script's words, to anchor it (made on first need)
+        self.listener: Decoder | None = None  # recognises any English words, for `heard` (made on first need)
 
     def _decoder(self, attempt: int, phone_loop: bool = False) -> Decoder:
         decoders = self.phone_loops if phone_loop else self.decoders
@@ -255,6 +260,21 @@ class Aligner:
         if duration - said_until > MIN_PHONE_SECONDS:
             unsaid.append((said_until, duration))
         return Alignment(_tile(spoken, duration), misfits, unsaid)
+
+    def heard(self, samples: np.ndarray) -> Alignment | None:
+        """The words recognised in `samples` (US English language model), aligned, with where they
+        fit poorly (as `align_checked`, without anchoring); None where no words are heard or they
+        cannot be aligned."""
+        if self.listener is None:
+            self.listener = Decoder(samprate=SAMPLE_RATE, loglevel="FATAL")
+        _decode(self.listener, _padded_pcm(samples))
+        words = [word for word in (segment.word.split("(")[0] for segment in self.listener.seg()) if not word.startswith(("<", "["))]
+        if not words:
+            return None
+        try:
+            return self._checked(samples, " ".join(words))
+        except PuppetError:
+            return None
 
     def _anchored(self, samples: np.ndarray, text: str) -> Alignment | None:
         """The script aligned between its anchors (module docstring), or None where too few of its
@@ -483,3 +503,8 @@ def align_checked(samples: np.ndarray, words: str | tuple[Cue, ...]) -> Alignmen
     if isinstance(words, str):
         return _default_aligner().align_checked(samples, words)
     return _default_aligner().align_cues(samples, words)
+
+
+def heard(samples: np.ndarray) -> Alignment | None:
+    """The words recognised in (N,) float32 16 kHz `samples`, aligned; see `Aligner.heard`."""
+    return _default_aligner().heard(samples)

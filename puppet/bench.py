@@ -34,6 +34,7 @@ from puppet.renderer import (
 SIZES = {"512": (512, 512), "1080": (1920, 1080)}
 EXPORT_SIZE = (512, 512)
 EXPORT_RUNS = 2  # the export figure is the faster of this many whole renders
+RECOGNISE_RUNS = 2  # recognise_realtime_x: the faster of this many runs on the demo clip
 LIVE_SIZE = (512, 512)  # the demo's live window
 LIVE_FPS = 60.0  # a common display rate
 SOAK_SAMPLE = 10.0  # seconds between memory samples in a soak
@@ -132,8 +133,9 @@ def measure_export(puppet: bundle.Puppet, clip_seconds: float) -> dict:
 
 
 def measure_predictor(seconds: float) -> dict:
-    """predictor_ms_per_frame (the streaming model in 20 ms chunks, one thread) and predict_realtime_x
-(what files use on the whole clip: the offline and streaming models averaged, a thread each)."""
+    """predictor_ms_per_frame (the streaming model in 20 ms chunks, one thread), predict_realtime_x
+(what files use on the whole clip: the offline and streaming models averaged, a thread each) and
+recognise_realtime_x (the same with --recognise: the words recognised, aligned and articulated)."""
     from puppet import lipsync, speaker
     from puppet.predictor import Predictor, default_model
 
@@ -154,6 +156,11 @@ def measure_predictor(seconds: float) -> dict:
     def offline_clip():
         offline.predict(samples, embedding)
 
+    def recognised_clip():
+        start = time.perf_counter()
+        lipsync.speech_offsets(samples, offline, embedding, recognise=True)
+        return time.perf_counter() - start
+
     frames = stream_clip()
     stream_rate = _rates({"stream": stream_clip}, seconds, rounds=3)["stream"]
     offline_rate = _rates({"offline": offline_clip}, seconds, rounds=3)["offline"]
@@ -161,6 +168,7 @@ def measure_predictor(seconds: float) -> dict:
     return {
         "predictor_ms_per_frame": round(1000 / (stream_rate * frames), 3),
         "predict_realtime_x": round(offline_rate * clip_seconds, 1),
+        "recognise_realtime_x": round(clip_seconds / min(recognised_clip() for _ in range(RECOGNISE_RUNS)), 1),
     }
 
 

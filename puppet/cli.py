@@ -77,6 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_rigging_arguments(render)
     render.add_argument("--motion", help="motion source: 'learned' (the lip-sync network; the default when installed), 'loudness' (a volume-driven baseline) or a track .npz (from --landmarks-out or puppet predict)")
     render.add_argument("--transcript", type=Path, metavar="TEXT_FILE", help="the words spoken (UTF-8 text, or .srt/.vtt subtitles: each cue aligned within its own times; English): the jaw and lips follow their phones, aligned to the audio; sharper than the network alone on p/b/m and oo/w")
+    render.add_argument("--recognise", action="store_true", help="no transcript? recognise the words spoken (English) and move the jaw and lips from their phones as --transcript does: sharper p/b/m and oo/w than the network alone; about 25 s a minute of speech")
     render.add_argument("--size", type=parse_size, help="output WIDTHxHEIGHT, or one number for the longer side (default: the portrait's size, at most 1080)")
     render.add_argument("--fps", type=float, default=25.0, help="frames per second (default 25)")
     render.add_argument("--background", type=parse_background, help="'transparent', white, black, green, blue, magenta, grey or #rrggbb (default: transparent for frames, white for video)")
@@ -153,6 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     predict.add_argument("--face", type=Path, help="the face's 68 landmarks (text, .json or .npy; pixels); default: puppet's canonical face in a 512×512 frame")
     predict.add_argument("-o", "--output", type=Path, required=True, help="track file to write (.npz: landmarks (T,68,3) float32, fps)")
     predict.add_argument("--transcript", type=Path, metavar="TEXT_FILE", help="the words spoken (UTF-8 text, or .srt/.vtt subtitles: each cue aligned within its own times; English): the jaw and lips follow their phones, aligned to the audio")
+    predict.add_argument("--recognise", action="store_true", help="no transcript? recognise the words spoken (English) and move the jaw and lips from their phones as --transcript does")
     predict.add_argument("--fps", type=float, default=25.0, help="frames per second of the track (default 25)")
     predict.add_argument("--seed", type=int, default=0, help="seed for blinks and idle motion (default 0)")
     predict.add_argument("-f", "--force", action="store_true", help="overwrite an existing track")
@@ -262,15 +264,17 @@ def run(args: argparse.Namespace) -> int:
         if audio_path is None and args.motion in (None,) + video.MOTION_SOURCES:
             raise PuppetError("give an audio file after the portrait (or --motion TRACK.npz)")
     motion = args.motion or video.default_motion()
+    if args.transcript and args.recognise:
+        raise PuppetError("give --transcript or --recognise, not both")
     transcript = lipsync.read_transcript(args.transcript) if args.transcript else None
     options = video.VideoOptions(fps=args.fps, background=args.background, samples=args.msaa, motion=motion, expression=args.expression,
-                                 transcript=transcript)
+                                 transcript=transcript, recognise=args.recognise)
     if args.size is not None:
         size = args.size if isinstance(args.size, tuple) else video.output_size(puppet.rig.image_size, args.size)
         options = replace(options, size=size)
     options = replace(options, life=replace(options.life, seed=args.seed))
-    if transcript is not None and motion == "learned" and not args.quiet:
-        _say_aligning()
+    if (transcript is not None or args.recognise) and motion == "learned" and not args.quiet:
+        _say_aligning(args.recognise)
     output = video.render(puppet, audio_path, args.output, options, args.force, args.landmarks_out, progress=not args.quiet)
     print(f"wrote {output}")
     return 0
@@ -295,9 +299,12 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
-def _say_aligning() -> None:
-    """What the wait before the first frame is, when a transcript is aligned (no bar can show its progress)."""
-    print("aligning the transcript to the audio (about 6 s a minute of speech, more where it does not fit)…", file=sys.stderr, flush=True)
+def _say_aligning(recognise: bool = False) -> None:
+    """What the wait before the first frame is, when words are recognised or a transcript is aligned (no bar can show its progress)."""
+    if recognise:
+        print("recognising the words and aligning them to the audio (about 25 s a minute of speech)…", file=sys.stderr, flush=True)
+    else:
+        print("aligning the transcript to the audio (about 6 s a minute of speech, more where it does not fit)…", file=sys.stderr, flush=True)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -316,15 +323,17 @@ def _predict(args: argparse.Namespace) -> int:
     from puppet.pose import posed_landmarks
     from puppet.video import check_track_output
 
+    if args.transcript and args.recognise:
+        raise PuppetError("give --transcript or --recognise, not both")
     output = check_track_output(args.output, args.force)
     rest = with_depth(load(args.face) if args.face else canonical_face_pixels())
     transcript = lipsync.read_transcript(args.transcript) if args.transcript else None
     samples = audio.load(args.audio)
     audio.check_audible(samples, str(args.audio))
     frames = frame_count(len(samples), audio.ANALYSIS_RATE, args.fps)
-    if transcript is not None:
-        _say_aligning()
-    motion = lipsync.learned_motion(samples, rest, args.fps, frames, transcript=transcript)
+    if transcript is not None or args.recognise:
+        _say_aligning(args.recognise)
+    motion = lipsync.learned_motion(samples, rest, args.fps, frames, transcript=transcript, recognise=args.recognise)
     motion = motion + life_motion(frames, args.fps, rest, LifeOptions(seed=args.seed))
     track.write(output, posed_landmarks(rest, motion), args.fps)
     print(f"wrote {output} ({frames} frames at {args.fps:g} fps)")

@@ -148,7 +148,7 @@ def score_video(path: Path, sources: dict[str, Source], canonical: np.ndarray, c
     return scores
 
 
-PLOT_COLOURS = {"real": (20, 20, 20), "learned": (200, 90, 30), "learned-live": (230, 170, 90), "loudness": (60, 140, 230)}  # BGR
+PLOT_COLOURS = {"real": (20, 20, 20), "learned": (200, 90, 30), "learned-live": (230, 170, 90), "recognised": (60, 170, 60), "loudness": (60, 140, 230)}  # BGR
 
 
 def plot_openings(title: str, real: np.ndarray, predicted: dict[str, np.ndarray], correlations: dict[str, float],
@@ -202,7 +202,8 @@ def score_synthetic(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], sour
 def baselines(canonical: np.ndarray) -> dict[str, Source]:
     """The sources every run scores: the learned networks as files get them, at rest in pauses (when this
     install has them: "learned" is what files are rendered with, the offline and streaming models
-    averaged, "learned-live" the streaming model alone, as live), the loudness baseline and a static
+    averaged, "learned-live" the streaming model alone, as live, "recognised" files rendered with
+    --recognise: the jaw and lips from the words recognised in the audio), the loudness baseline and a static
     face; each maps 16 kHz speech to (offsets (T, 68, 3), rotation (T, 3) | None)."""
     from puppet import lipsync, speaker
     from puppet.loudness import loudness_motion
@@ -222,10 +223,11 @@ def baselines(canonical: np.ndarray) -> dict[str, Source]:
                 heard.update(samples=samples, embedding=speaker.embed(samples))
             return heard["embedding"]
 
-        def learned(predictor):
-            return lambda samples: lipsync.speech_offsets(samples, predictor(), embedding(samples))
+        def learned(predictor, recognise=False):
+            return lambda samples: lipsync.speech_offsets(samples, predictor(), embedding(samples), recognise=recognise)
 
-        sources = {"learned": learned(lipsync.file_predictor), "learned-live": learned(lambda: lipsync.shipped_predictor("streaming")), **sources}
+        sources = {"learned": learned(lipsync.file_predictor), "learned-live": learned(lambda: lipsync.shipped_predictor("streaming")),
+                   "recognised": learned(lipsync.file_predictor, recognise=True), **sources}
     return sources
 
 

@@ -18,6 +18,12 @@ Transcripts. When the words spoken are known (a script, subtitles), the aligner 
 places their phones in the audio and the articulation model (puppet.visemes) that made the network's
 training targets moves the jaw and lips from them directly: every p/b/m closes, every "oo" rounds,
 on time, whatever the voice. Brows, eyes and head still come from the network.
+
+Recognised words. With no script, the words can be recognised in the audio (puppet.alignment.heard,
+pocketsphinx's English language model) and their phones aligned and articulated the same way. The
+recogniser also hears words in music or noise where nobody speaks; the network does not (its voice
+detector), so wherever the network's jaw and lips stay within STILL_TOLERANCE of rest for
+PAUSE_SECONDS or more, the mouth stays the network's.
 """
 import functools
 import re
@@ -25,9 +31,10 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 
 from puppet import speaker
-from puppet.alignment import Cue, align_checked
+from puppet.alignment import Alignment, Cue, align_checked, heard
 from puppet.errors import PuppetError, PuppetWarning
 from puppet.features import MOTION_FPS, SAMPLE_RATE, motion_frame_count
 from puppet.landmarks import JAW, MOUTH, from_face_units
@@ -95,6 +102,7 @@ SUBTITLE_TIME = r"(?:(\d+):)?(\d{1,2}):(\d{1,2})[.,](\d{1,3})"  # [hh:]mm:ss,mmm
 SUBTITLE_TIMING = re.compile(rf"\s*{SUBTITLE_TIME}\s*-->\s*{SUBTITLE_TIME}")
 MISFITS_NAMED = 3  # a poorly fitting transcript's warning names this many stretches of audio
 MISFIT_EASE = 0.1  # seconds over which the mouth passes between the transcript's and the network's
+STILL_TOLERANCE = 0.03  # face units: recognised words do not move a mouth the network holds this close to rest
 
 
 def read_transcript(path) -> str | tuple[Cue, ...]:
@@ -146,13 +154,35 @@ def spoken_mouth(offsets: np.ndarray, samples: np.ndarray, transcript: str | tup
         more = f" and {len(aligned.misfits) - MISFITS_NAMED} more" if len(aligned.misfits) > MISFITS_NAMED else ""
         warnings.warn(PuppetWarning(f"the transcript does not fit the audio at {named}{more}: are those the words spoken? "
                                     "The mouth follows the sound there instead"), stacklevel=2)
+    return articulated(offsets, aligned)
+
+
+def heard_mouth(offsets: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """`spoken_mouth` with the words recognised in the speech instead of a transcript (module
+    docstring): (T, 68, 3) canonical offsets for (N,) float32 16 kHz speech; where no words are
+    heard, or the network holds the mouth at rest, its offsets are kept."""
+    aligned = heard(samples)
+    if aligned is None:
+        return offsets
+    spoken = articulated(offsets, aligned)
+    near_rest = np.abs(offsets[:, SPOKEN_POINTS, :2]).max(axis=(1, 2)) < STILL_TOLERANCE
+    run = round(PAUSE_SECONDS * MOTION_FPS)
+    still = ndimage.maximum_filter1d(ndimage.minimum_filter1d(near_rest.astype(np.float32), run), run)  # runs of `run` frames or more
+    still = ndimage.uniform_filter1d(still, round(MISFIT_EASE * MOTION_FPS) | 1)[:, None, None]  # eased in and out
+    spoken[:, SPOKEN_POINTS] = still * offsets[:, SPOKEN_POINTS] + (1.0 - still) * spoken[:, SPOKEN_POINTS]
+    return spoken
+
+
+def articulated(offsets: np.ndarray, aligned: Alignment) -> np.ndarray:
+    """(T, 68, 3) offsets with the jaw and lips moved by the aligned phones' articulation, except
+    where the words fit poorly or were not given (eased over MISFIT_EASE): there they stay the network's."""
     times = frame_times(len(offsets))
-    heard = np.zeros(len(offsets))
+    network = np.zeros(len(offsets))  # (T,) share of the network's jaw and lips
     for start, end in aligned.misfits + aligned.unsaid:
-        heard = np.maximum(heard, np.clip(np.minimum(times - start, end - times) / MISFIT_EASE + 1.0, 0.0, 1.0))
+        network = np.maximum(network, np.clip(np.minimum(times - start, end - times) / MISFIT_EASE + 1.0, 0.0, 1.0))
     said = mouth_motion(aligned.phones, len(offsets))
     spoken = offsets.copy()
-    spoken[:, SPOKEN_POINTS] = heard[:, None, None] * offsets[:, SPOKEN_POINTS] + (1.0 - heard[:, None, None]) * said[:, SPOKEN_POINTS]
+    spoken[:, SPOKEN_POINTS] = network[:, None, None] * offsets[:, SPOKEN_POINTS] + (1.0 - network[:, None, None]) * said[:, SPOKEN_POINTS]
     return spoken
 
 
@@ -163,25 +193,29 @@ def clock(seconds: float) -> str:
 
 
 def speech_offsets(samples: np.ndarray, predictor: Predictor | Ensemble, embedding: np.ndarray | None = None,
-                   transcript: str | tuple[Cue, ...] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   transcript: str | tuple[Cue, ...] | None = None, recognise: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The network's answer for (N,) float32 16 kHz mono speech, at rest in its pauses: canonical
     offsets (T, 68, 3) in face units and head rotation (T, 3) radians, at MOTION_FPS. embedding: the
     voice's (256,) speaker embedding when already known; transcript: the words spoken, when known
-    (the jaw and lips then follow their phones, see spoken_mouth)."""
+    (the jaw and lips then follow their phones, see spoken_mouth); recognise: without a transcript,
+    the jaw and lips follow the phones of the words recognised in the speech (see heard_mouth)."""
     embedding = speaker.embed(samples) if embedding is None else embedding
     offsets, rotation = predictor.predict(samples, embedding, SAMPLE_RATE)
     offsets = offsets * pause_weights(samples)[:, None, None]
     if transcript is not None:
         offsets = spoken_mouth(offsets, samples, transcript)
+    elif recognise:
+        offsets = heard_mouth(offsets, samples)
     return offsets, rotation
 
 
 def learned_motion(samples: np.ndarray, rest: np.ndarray, fps: float, frames: int, predictor: Predictor | Ensemble | None = None,
-                   transcript: str | tuple[Cue, ...] | None = None) -> Motion:
+                   transcript: str | tuple[Cue, ...] | None = None, recognise: bool = False) -> Motion:
     """Motion of `frames` frames at `fps` for (N,) float32 16 kHz speech on a face with (68, 3)
     rest landmarks (pixels): mouth and expression offsets and head rotation, no translation.
-    transcript: the words spoken, when known (see spoken_mouth)."""
-    offsets, rotation = speech_offsets(samples, predictor or file_predictor(), transcript=transcript)
+    transcript, recognise: where the jaw and lips take their phones from, if not from the network
+    (see speech_offsets)."""
+    offsets, rotation = speech_offsets(samples, predictor or file_predictor(), transcript=transcript, recognise=recognise)
     return Motion(
         offsets=from_face_units(resample(offsets, MOTION_FPS, fps, frames), rest),
         rotation=resample(rotation, MOTION_FPS, fps, frames),

@@ -39,6 +39,7 @@ class VideoOptions:
     life: LifeOptions = field(default_factory=LifeOptions)  # blinks, idle head motion, breathing
     expression: str = "neutral"  # a mood held through the clip (puppet.expression.EXPRESSIONS)
     transcript: str | tuple[Cue, ...] | None = None  # the words spoken (text or subtitle cues): the learned motion's jaw and lips follow their phones
+    recognise: bool = False  # no transcript: the learned motion's jaw and lips follow the phones of the words recognised in the audio
 
 
 def default_motion() -> str:
@@ -57,6 +58,8 @@ def make_motion(puppet: Puppet, audio_path: Path | None, options: VideoOptions) 
     rest = puppet.rig.landmarks
     if options.transcript is not None and options.motion != "learned":
         raise PuppetError("a transcript drives the learned motion only, not --motion loudness or a track")
+    if options.recognise and (options.motion != "learned" or options.transcript is not None):
+        raise PuppetError("recognising the words drives the learned motion only, and only without a transcript")
     if options.motion in MOTION_SOURCES:
         if audio_path is None:
             raise PuppetError(f"the {options.motion} motion needs an audio file")
@@ -66,7 +69,8 @@ def make_motion(puppet: Puppet, audio_path: Path | None, options: VideoOptions) 
             if not lipsync.has_model():
                 raise PuppetError("this install has no trained lip-sync model: run `puppet train`, or use --motion loudness")
             frames = frame_count(len(samples), audio.ANALYSIS_RATE, options.fps)
-            speech = lipsync.learned_motion(samples, rest, options.fps, frames, transcript=options.transcript)
+            speech = lipsync.learned_motion(samples, rest, options.fps, frames, transcript=options.transcript,
+                                            recognise=options.recognise)
         else:
             speech = loudness_motion(samples, audio.ANALYSIS_RATE, rest, options.fps, options.loudness)
         activity = _activity(speech)

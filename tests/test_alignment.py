@@ -18,6 +18,7 @@ from puppet.alignment import (
     align_checked,
     common_runs,
     guess_pronunciation,
+    heard,
     normalise,
     script_language_model,
 )
@@ -110,6 +111,19 @@ def test_the_right_words_fit_and_other_words_are_found_where_they_are(demo_speec
     swapped = text.replace(sentence, " The quick brown fox jumps over the lazy dog", 1)
     (misfit,) = align_checked(samples, swapped).misfits
     assert start <= misfit[0] and misfit[1] <= end and misfit[1] - misfit[0] > 1.0
+
+
+def test_without_a_transcript_the_words_heard_are_aligned(demo_speech):
+    """The recogniser's words for the demo ("i bet your pocket … a blob pixels could be this much fun")
+    are often wrong, but their phones fall on 84 % of 10 ms frames as the transcript's do."""
+    samples, text = audio.load(demo_speech), demo_speech.with_suffix(".txt").read_text()
+    recognised = heard(samples)
+    duration = len(samples) / 16000
+    assert_tiles(recognised.phones, duration)
+    n = round(duration / FRAME)
+    as_heard = frame_labels([(p.phone, p.start, p.end) for p in recognised.phones], n)
+    as_written = frame_labels([(p.phone, p.start, p.end) for p in align(samples, text)], n)
+    assert np.mean(as_heard == as_written) > 0.75
 
 
 def test_poor_fits_are_runs_of_a_low_windowed_score_with_near_runs_merged():

@@ -209,3 +209,14 @@ def test_bad_transcripts(files, capsys, demo_speech):
     text = demo_speech.with_suffix(".txt")
     fails(capsys, ["render", "--demo", "--motion", "loudness", "--transcript", text, "-o", out], "learned motion only")
     assert not out.exists()
+
+
+def test_recognising_the_words_needs_the_learned_motion_and_no_transcript(files, capsys, demo_speech):
+    out, track = files["dir"] / "out.mp4", files["dir"] / "motion.npz"
+    text = demo_speech.with_suffix(".txt")
+    fails(capsys, ["render", "--demo", "--motion", "loudness", "--recognise", "-o", out], "learned motion only")
+    fails(capsys, ["render", "--demo", "--transcript", text, "--recognise", "-o", out], "not both")
+    fails(capsys, ["predict", demo_speech, "--transcript", text, "--recognise", "-o", track], "not both")
+    assert not out.exists() and not track.exists()
+    assert main(["predict", str(demo_speech), "--recognise", "-o", str(track)]) == 0
+    assert capsys.readouterr().err.startswith("recognising the words") and track.is_file()

@@ -164,6 +164,49 @@ def test_over_a_loud_music_bed_the_transcript_still_shuts_every_p_b_m(demo_speec
     assert gap[closures].max() < -0.04
 
 
+def test_recognised_words_move_the_jaw_and_lips_by_their_phones(demo_speech):
+    """Without a transcript, the words heard in the demo ("i bet your pocket … who knew a blob pixels
+    could be this much fun") shut the lips on the p/b/m the recogniser placed and open them on its
+    vowels; brows, eyes and head stay the network's; silence gives the network's mouth."""
+    from puppet.alignment import heard
+    from puppet.features import MOTION_FPS
+    from puppet.visemes import canonical_rest
+
+    samples = audio.load(demo_speech)
+    predictor = lipsync.shipped_predictor("offline")
+    network, rotation = lipsync.speech_offsets(samples, predictor)
+    recognised, recognised_rotation = lipsync.speech_offsets(samples, predictor, recognise=True)
+    others = [i for i in range(68) if i not in lipsync.SPOKEN_POINTS]
+    assert np.array_equal(recognised[:, others], network[:, others]) and np.array_equal(recognised_rotation, rotation)
+    phones = heard(samples).phones
+    middle = {p.phone: [] for p in phones}
+    for p in phones:
+        middle[p.phone].append(int((p.start + p.end) / 2 * MOTION_FPS))
+    gap = lip_opening(canonical_rest()[None] + recognised) - lip_opening(canonical_rest()[None])
+    closures = middle["P"] + middle["B"] + middle["M"]
+    assert len(closures) >= 6 and gap[closures].max() < -0.04
+    assert gap[middle["AE"] + middle["AH"] + middle["AA"]].max() > 0.15
+    silence = np.zeros(32000, np.float32)
+    assert np.array_equal(lipsync.heard_mouth(network[:100] * 0, silence), network[:100] * 0)
+
+
+def test_words_heard_in_music_do_not_move_a_mouth_the_network_rests(demo_speech, monkeypatch):
+    """The recogniser hears words in 3 s of music before the voice (without the network's stillness
+    there the lips open up to 0.14 IOD and 0.027 on average); the mouth stays at rest, and talks after."""
+    from puppet import nonspeech
+    from puppet.visemes import canonical_rest
+
+    monkeypatch.setattr(nonspeech, "soundfont", lambda: None)
+    speech = audio.load(demo_speech)
+    music = 0.5 * nonspeech._normalised(nonspeech.music(len(speech) + 48000, np.random.default_rng(2024)))
+    music *= np.sqrt(np.mean(speech**2) / np.mean(music**2)) * 10 ** (-10 / 20)
+    mix = np.concatenate([music[:48000], speech + music[48000:]]).astype(np.float32)
+    offsets, _ = lipsync.speech_offsets(mix, lipsync.shipped_predictor("offline"), recognise=True)
+    gap = lip_opening(canonical_rest()[None] + offsets) - lip_opening(canonical_rest()[None])  # 50 fps
+    assert np.abs(gap[5:145]).mean() < 0.01
+    assert gap[150:].max() > 0.15 and gap[150:].min() < -0.04
+
+
 def test_where_the_transcript_does_not_fit_the_mouth_follows_the_sound(demo_speech):
     from puppet.alignment import Cue
     from puppet.visemes import frame_times
