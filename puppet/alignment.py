@@ -29,11 +29,13 @@ script to its stretch of audio. Those stretches, and the script between them, ar
 timed cues, like subtitles; script words that fall where no audio is left were not said, and
 speech heard where the script has no words is reported as a poor fit. A recogniser that knows only
 the script's words finds some of them in any speech, so a script is anchored only if at least
-ANCHORED_SHARE of its words are pinned; otherwise the whole alignment stands.
+ANCHORED_SHARE of its words are pinned; otherwise the whole alignment stands. Long audio is anchored
+whether or not it fits: a forced alignment's memory grows with the square of its length.
 
 With no script at all, `heard` recognises the words with the wheel's general US English language
-model (as Rhubarb Lip Sync does) and aligns those: a recogniser's words are often wrong, but mostly
-by sound-alikes ("guess would" for "Dashwood"), and the mouth needs only their phones.
+model (as Rhubarb Lip Sync does) and aligns those, each run between pauses as a timed cue: a
+recogniser's words are often wrong, but mostly by sound-alikes ("guess would" for "Dashwood"), and
+the mouth needs only their phones.
 
 The acoustic model and dictionary ship in the pocketsphinx wheel (US English, CMU ARPAbet without
 stress marks, 39 phones + SIL).
@@ -88,6 +90,14 @@ RECOGNITION_BEAMS = {"beam": 1e-60, "pbeam": 1e-60, "wbeam": 1e-40}
 # words (and 2) heard there is speech the script lacks, where its few words cannot be placed.
 WORD_SECONDS = 0.1
 UNSCRIPTED_RATIO = 2
+# Forced alignment holds every frame × every state of the words it aligns at once, so its memory
+# grows with the square of the audio's length (6 minutes of read speech in one piece: 3.2 GB).
+# Audio longer than LONG_AUDIO_SECONDS is therefore anchored first (its runs of pinned words cut
+# into cues of at most MAX_CUE_SECONDS), and recognised words are aligned as cues that end at a
+# pause of HEARD_PAUSE between words or at MAX_CUE_SECONDS.
+LONG_AUDIO_SECONDS = 120.0
+MAX_CUE_SECONDS = 20.0
+HEARD_PAUSE = 0.25
 
 # Letter groups → phones, tried longest first, for words the dictionary lacks.
 GRAPHEMES = {
@@ -211,7 +221,12 @@ class Aligner:
         """The phones of `text` in `samples` and the stretches of audio where the words fit poorly:
         spoken differently or not at all, or words spoken that the text lacks. Aligned whole, or, if
         that fits poorly or fails, anchored on the runs of words recognised as in the script (module
-        docstring); PuppetError if neither places any words."""
+        docstring; audio longer than LONG_AUDIO_SECONDS is anchored first, to bound memory);
+        PuppetError if neither places any words."""
+        if len(samples) / SAMPLE_RATE > LONG_AUDIO_SECONDS:
+            anchored = self._anchored(samples, text)
+            if anchored is not None:
+                return anchored
         try:
             whole = self._checked(samples, text)
             if not whole.misfits:
@@ -262,19 +277,22 @@ class Aligner:
         return Alignment(_tile(spoken, duration), misfits, unsaid)
 
     def heard(self, samples: np.ndarray) -> Alignment | None:
-        """The words recognised in `samples` (US English language model), aligned, with where they
-        fit poorly (as `align_checked`, without anchoring); None where no words are heard or they
-        cannot be aligned."""
+        """The words recognised in `samples` (US English language model), aligned in runs between
+        pauses as timed cues (see `align_cues`: audio outside every run is unsaid); None where no words are heard."""
         if self.listener is None:
             self.listener = Decoder(samprate=SAMPLE_RATE, loglevel="FATAL")
         _decode(self.listener, _padded_pcm(samples))
-        words = [word for word in (segment.word.split("(")[0] for segment in self.listener.seg()) if not word.startswith(("<", "["))]
+        words = [(segment.word.split("(")[0], _frame_seconds(self.listener, segment.start_frame), _frame_seconds(self.listener, segment.end_frame + 1))
+                 for segment in self.listener.seg()]
+        words = [(word, start, end) for word, start, end in words if not word.startswith(("<", "["))]
         if not words:
             return None
-        try:
-            return self._checked(samples, " ".join(words))
-        except PuppetError:
-            return None
+        runs = [[words[0]]]
+        for word in words[1:]:
+            if word[1] - runs[-1][-1][2] >= HEARD_PAUSE or word[1] - runs[-1][0][1] >= MAX_CUE_SECONDS:
+                runs.append([])
+            runs[-1].append(word)
+        return self.align_cues(samples, tuple(Cue(run[0][1], run[-1][2], " ".join(word for word, _, _ in run)) for run in runs))
 
     def _anchored(self, samples: np.ndarray, text: str) -> Alignment | None:
         """The script aligned between its anchors (module docstring), or None where too few of its
@@ -295,8 +313,12 @@ class Aligner:
                 cues.append(Cue(until, start, " ".join(between)))
             elif in_heard > heard_until:  # speech where the script has nothing (left)
                 unscripted.append((heard[heard_until][1], heard[in_heard - 1][2]))
+            piece = 0  # the run cut into cues of at most MAX_CUE_SECONDS
+            for end in range(1, size + 1):
+                if end == size or heard[in_heard + end][2] - heard[in_heard + piece][1] > MAX_CUE_SECONDS:
+                    cues.append(Cue(heard[in_heard + piece][1], heard[in_heard + end - 1][2], " ".join(words[in_script + piece:in_script + end])))
+                    piece = end
             if size:
-                cues.append(Cue(start, heard[in_heard + size - 1][2], " ".join(words[in_script:in_script + size])))
                 said, heard_until, until = in_script + size, in_heard + size, cues[-1].end
         aligned = self.align_cues(samples, tuple(cues))
         return Alignment(aligned.phones, sorted(aligned.misfits + unscripted), aligned.unsaid)

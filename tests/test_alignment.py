@@ -191,3 +191,23 @@ def test_a_script_that_skips_a_sentence_is_anchored_and_the_rest_placed_as_in_th
     labels = frame_labels([(p.phone, p.start, p.end) for p in skipped.phones], n)
     others = np.r_[0:int(cues[0].end / FRAME), int(cues[2].start / FRAME):n]
     assert (labels == frame_labels([(p.phone, p.start, p.end) for p in whole], n))[others].mean() > 0.95
+
+
+def test_long_audio_is_anchored_in_short_pieces_and_placed_as_when_aligned_whole(demo_speech, monkeypatch):
+    """A forced alignment's memory grows with the square of its length (6 minutes whole: 3.2 GB; anchored
+    in pieces of at most 20 s: 0.47 GB, 99 % of frames as whole). Here the demo stands in for long audio."""
+    from puppet import alignment
+
+    samples, text = audio.load(demo_speech), demo_speech.with_suffix(".txt").read_text()
+    whole = align(samples, text)
+    monkeypatch.setattr(alignment, "LONG_AUDIO_SECONDS", 5.0)
+    monkeypatch.setattr(alignment, "MAX_CUE_SECONDS", 2.0)
+    pieces = []
+    align_cues = alignment.Aligner.align_cues
+    monkeypatch.setattr(alignment.Aligner, "align_cues", lambda self, s, cues: pieces.extend(cues) or align_cues(self, s, cues))
+    anchored = alignment.Aligner().align_checked(samples, text)
+    assert len(pieces) >= 4 and max(cue.end - cue.start for cue in pieces) < 2.0 + 1.0  # ends at the word that crosses 2 s
+    assert anchored.misfits == []
+    n = int(len(samples) / 16000 / FRAME)
+    as_whole = frame_labels([(p.phone, p.start, p.end) for p in whole], n)
+    assert (frame_labels([(p.phone, p.start, p.end) for p in anchored.phones], n) == as_whole).mean() > 0.95
