@@ -80,7 +80,7 @@ def test_training_labels_are_scored_against_festivals_own_phone_times():
 
 
 def test_sounds_with_nobody_speaking_are_scored_by_how_far_the_mouth_opens(tmp_path, monkeypatch):
-    """Music and typing made up from seeds training never drew: the learned sources keep the lips near
+    """Music and typing made up from seeds training never drew: the learned sources (and --recognise) keep the lips near
     rest where the loudness baseline opens them; a folder without audio is refused."""
     import wave
 
@@ -99,7 +99,7 @@ def test_sounds_with_nobody_speaking_are_scored_by_how_far_the_mouth_opens(tmp_p
     scores = evaluate.score_sounds(tmp_path)
     rest = scores["learned"]["rest_gap"]
     assert scores["static"]["mean_gap"] == pytest.approx(rest) and scores["static"]["worst_gap"] == pytest.approx(rest)
-    for name in ("learned", "learned-live"):
+    for name in ("learned", "learned-live", "recognised"):  # words the recogniser hears in music move nothing
         assert scores[name]["worst_gap"] < rest + 0.02
     assert scores["loudness"]["mean_gap"] > rest + 0.05
     with pytest.raises(PuppetError, match="no audio files"):
