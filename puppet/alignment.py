@@ -282,9 +282,7 @@ class Aligner:
         if self.listener is None:
             self.listener = Decoder(samprate=SAMPLE_RATE, loglevel="FATAL")
         _decode(self.listener, _padded_pcm(samples))
-        words = [(segment.word.split("(")[0], _frame_seconds(self.listener, segment.start_frame), _frame_seconds(self.listener, segment.end_frame + 1))
-                 for segment in self.listener.seg()]
-        words = [(word, start, end) for word, start, end in words if not word.startswith(("<", "["))]
+        words = [(word, start, end) for word, start, end in _words(self.listener) if not word.startswith(("<", "["))]  # no silences or noises
         if not words:
             return None
         runs = [[words[0]]]
@@ -337,8 +335,7 @@ class Aligner:
             decoder.add_lm_file("script", model.name)
         decoder.activate_search("script")
         _decode(decoder, _padded_pcm(samples))
-        return [(segment.word.split("(")[0], _frame_seconds(decoder, segment.start_frame), _frame_seconds(decoder, segment.end_frame + 1))
-                for segment in decoder.seg() if segment.word.split("(")[0] in vocabulary]
+        return [(word, start, end) for word, start, end in _words(decoder) if word in vocabulary]
 
     def _forced(self, samples: np.ndarray, text: str) -> tuple[list[tuple[str, int, int, float]], int]:
         """(_align's phones, the index of the SEARCHES entry that aligned them); PuppetError if none does."""
@@ -451,6 +448,13 @@ def _align(decoder: Decoder, words: list[str], raw: bytes) -> list[tuple[str, in
     if not aligned:
         raise RuntimeError("no phones")
     return aligned
+
+
+def _words(decoder: Decoder) -> list[tuple[str, float, float]]:
+    """(word, start, end seconds into the unpadded audio) of each segment of the decoder's last pass,
+    pronunciation variants named as their word ("the(2)" → "the")."""
+    return [(segment.word.split("(")[0], _frame_seconds(decoder, segment.start_frame), _frame_seconds(decoder, segment.end_frame + 1))
+            for segment in decoder.seg()]
 
 
 def _frame_seconds(decoder: Decoder, frame: int) -> float:
