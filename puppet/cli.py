@@ -248,7 +248,7 @@ def run(args: argparse.Namespace) -> int:
 
         return bench_main(args.json, args.seconds, args.clip, args.soak)
 
-    from puppet import lipsync, video
+    from puppet import audio, export, lipsync, video
 
     if args.demo:
         if args.input is not None:
@@ -274,6 +274,8 @@ def run(args: argparse.Namespace) -> int:
         options = replace(options, size=size)
     options = replace(options, life=replace(options.life, seed=args.seed))
     if (transcript is not None or args.recognise) and motion == "learned" and not args.quiet:
+        export.check_output(args.output, args.force)  # refuse a bad output or audio before announcing the wait
+        audio.probe(audio_path)
         _say_aligning(args.recognise)
     output = video.render(puppet, audio_path, args.output, options, args.force, args.landmarks_out, progress=not args.quiet)
     print(f"wrote {output}")

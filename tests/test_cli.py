@@ -218,5 +218,9 @@ def test_recognising_the_words_needs_the_learned_motion_and_no_transcript(files,
     fails(capsys, ["render", "--demo", "--transcript", text, "--recognise", "-o", out], "not both")
     fails(capsys, ["predict", demo_speech, "--transcript", text, "--recognise", "-o", track], "not both")
     assert not out.exists() and not track.exists()
+    out.write_bytes(b"precious")  # refused in one line, before any "recognising…" or "aligning…" notice
+    fails(capsys, ["render", "--demo", "--recognise", "-o", out], "--force")
+    fails(capsys, ["render", "--demo", "--transcript", text, "-o", out], "--force")
+    assert out.read_bytes() == b"precious"
     assert main(["predict", str(demo_speech), "--recognise", "-o", str(track)]) == 0
     assert capsys.readouterr().err.startswith("recognising the words") and track.is_file()
