@@ -100,6 +100,16 @@ def test_the_mouth_rests_in_a_noisy_pause(demo, demo_speech):
     assert np.abs(gap[start + 8 : start + int(1.5 * FPS) - 8]).max() < 0.002  # the network alone leaves ~0.008
 
 
+def music_then_speech(speech: np.ndarray) -> np.ndarray:
+    """3 s of made-up music (a seed training never drew; synthesised instruments, so the same with or
+    without fluidsynth: patch nonspeech.soundfont), then the speech with the music going on 10 dB under it."""
+    from puppet import nonspeech
+
+    music = 0.5 * nonspeech._normalised(nonspeech.music(len(speech) + 48000, np.random.default_rng(2024)))
+    music *= np.sqrt(np.mean(speech**2) / np.mean(music**2)) * 10 ** (-10 / 20)  # 10 dB under the voice
+    return np.concatenate([music[:48000], speech + music[48000:]])
+
+
 def test_the_mouth_rests_through_music_and_talks_over_it(demo, demo_speech, monkeypatch):
     """Music before the voice (made up from a seed training never drew, synthesised instruments so that
     the test is the same with or without fluidsynth) leaves the lips at rest, in files and live (the
@@ -110,13 +120,12 @@ def test_the_mouth_rests_through_music_and_talks_over_it(demo, demo_speech, monk
 
     monkeypatch.setattr(nonspeech, "soundfont", lambda: None)
     speech = audio.load(demo_speech)
-    music = 0.5 * nonspeech._normalised(nonspeech.music(len(speech) + 48000, np.random.default_rng(2024)))
-    music *= np.sqrt(np.mean(speech**2) / np.mean(music**2)) * 10 ** (-10 / 20)  # 10 dB under the voice
-    gap = opening(demo, np.concatenate([music[:48000], speech + music[48000:]]))
+    mix = music_then_speech(speech)
+    gap = opening(demo, mix)
     intro, talking = gap[5 : 3 * FPS - 5], gap[3 * FPS + 5 : -5]
     assert np.abs(intro).mean() < 0.01
     assert talking.max() > 0.12 and talking.std() > 0.03
-    live, _ = lipsync.speech_offsets(music[:48000], lipsync.shipped_predictor("streaming"))
+    live, _ = lipsync.speech_offsets(mix[:48000], lipsync.shipped_predictor("streaming"))  # the music alone
     rest = canonical_rest()
     assert np.abs(lip_opening(rest[None] + live) - lip_opening(rest[None])).mean() < 0.01
 
@@ -198,9 +207,7 @@ def test_words_heard_in_music_do_not_move_a_mouth_the_network_rests(demo_speech,
 
     monkeypatch.setattr(nonspeech, "soundfont", lambda: None)
     speech = audio.load(demo_speech)
-    music = 0.5 * nonspeech._normalised(nonspeech.music(len(speech) + 48000, np.random.default_rng(2024)))
-    music *= np.sqrt(np.mean(speech**2) / np.mean(music**2)) * 10 ** (-10 / 20)
-    mix = np.concatenate([music[:48000], speech + music[48000:]]).astype(np.float32)
+    mix = music_then_speech(speech).astype(np.float32)
     offsets, _ = lipsync.speech_offsets(mix, lipsync.shipped_predictor("offline"), recognise=True)
     gap = lip_opening(canonical_rest()[None] + offsets) - lip_opening(canonical_rest()[None])  # 50 fps
     assert np.abs(gap[5:145]).mean() < 0.01
